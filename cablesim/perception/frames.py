@@ -1,0 +1,225 @@
+"""Frames and streams: what crosses the sim/real boundary (SPEC section 2).
+
+A ``Frame`` holds one RGB-D image with the gripper position in the camera frame and its
+action/sample indices.  A ``Stream`` is the ordered frames of one interaction; its last frame
+is the target frame (arm out of view).  Simulated frames may carry ``FrameTruth``; nothing but
+evaluation may read it.  Pure NumPy: this module never imports MuJoCo.
+
+Conventions
+- camera frame: OpenCV (x right, y down, z forward), metres;
+- ``depth``: metric z-depth in metres, float32, 0 or NaN = invalid;
+- ``action``: 0, 1, ... for action frames, ``TARGET_ACTION`` (-1) for the target frame;
+- ``labels`` (truth): int16, hose index >= 0, ``LABEL_ROBOT`` (-2), ``LABEL_BACKGROUND`` (-1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from cablesim.errors import InputError
+
+TARGET_ACTION = -1
+LABEL_BACKGROUND = -1
+LABEL_ROBOT = -2
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics in pixels for an image of ``width`` x ``height``."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+    def __post_init__(self) -> None:
+        for name in ("fx", "fy"):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v <= 0:
+                raise InputError(f"intrinsics.{name} must be a positive focal length, got {v!r}")
+        for name in ("cx", "cy"):
+            if not np.isfinite(getattr(self, name)):
+                raise InputError(f"intrinsics.{name} must be finite")
+        if int(self.width) <= 0 or int(self.height) <= 0:
+            raise InputError(f"intrinsics size must be positive, got {self.width}x{self.height}")
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0, self.cx], [0, self.fy, self.cy], [0, 0, 1]], np.float64)
+
+    @property
+    def f(self) -> float:
+        """Mean focal length in pixels."""
+        return 0.5 * (self.fx + self.fy)
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Camera-frame points (...,3) -> pixel coordinates (...,2) (x = column, y = row)."""
+        p = np.asarray(points, np.float64)
+        z = p[..., 2]
+        return np.stack([self.fx * p[..., 0] / z + self.cx, self.fy * p[..., 1] / z + self.cy], -1)
+
+    def backproject(self, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """Pixels (...,2) with depths (...) -> camera-frame points (...,3)."""
+        uv = np.asarray(uv, np.float64)
+        z = np.asarray(depth, np.float64)
+        x = (uv[..., 0] - self.cx) / self.fx * z
+        y = (uv[..., 1] - self.cy) / self.fy * z
+        return np.stack([x, y, z], -1)
+
+    def scaled(self, sx: float, sy: float | None = None) -> Intrinsics:
+        sy = sx if sy is None else sy
+        return Intrinsics(
+            self.fx * sx,
+            self.fy * sy,
+            (self.cx + 0.5) * sx - 0.5,
+            (self.cy + 0.5) * sy - 0.5,
+            round(self.width * sx),
+            round(self.height * sy),
+        )
+
+    def to_dict(self) -> dict[str, float]:
+        return {
+            "fx": self.fx,
+            "fy": self.fy,
+            "cx": self.cx,
+            "cy": self.cy,
+            "width": int(self.width),
+            "height": int(self.height),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Intrinsics:
+        missing = [k for k in ("fx", "fy", "cx", "cy", "width", "height") if k not in d]
+        if missing:
+            raise InputError(f"intrinsics missing {missing}")
+        return cls(
+            float(d["fx"]),
+            float(d["fy"]),
+            float(d["cx"]),
+            float(d["cy"]),
+            int(d["width"]),
+            int(d["height"]),
+        )
+
+
+@dataclass
+class FrameTruth:
+    """Simulation ground truth of one frame (SPEC section 6). Evaluation only."""
+
+    labels: np.ndarray  # HxW int16
+    grasped_hose: int | None = None
+    flow_to_target: np.ndarray | None = None  # HxWx2 float32, in this frame's pixels
+    flow_valid: np.ndarray | None = None  # HxW bool
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def hose_mask(self, hose: int) -> np.ndarray:
+        return self.labels == hose
+
+    @property
+    def robot_mask(self) -> np.ndarray:
+        return self.labels == LABEL_ROBOT
+
+
+@dataclass
+class Frame:
+    """One RGB-D frame of an interaction stream."""
+
+    rgb: np.ndarray
+    depth: np.ndarray
+    intrinsics: Intrinsics
+    gripper: np.ndarray  # (3,) metres, camera frame
+    action: int = TARGET_ACTION
+    sample: int = 0
+    timestamp: float = 0.0
+    gripper_quat: np.ndarray | None = None  # (4,) wxyz, camera frame
+    gripper_opening: float | None = None  # metres
+    truth: FrameTruth | None = None
+
+    def __post_init__(self) -> None:
+        validate_rgbd(self.rgb, self.depth, self.intrinsics)
+        g = np.asarray(self.gripper, dtype=np.float64)
+        if g.shape != (3,):
+            raise InputError(f"gripper must have shape (3,), got {g.shape}")
+        self.gripper = g
+
+    @property
+    def is_target(self) -> bool:
+        return self.action == TARGET_ACTION
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.rgb.shape[:2]
+
+
+def validate_rgbd(rgb: np.ndarray, depth: np.ndarray | None, intrinsics: Intrinsics | None) -> None:
+    """Raise ``InputError`` naming the problem unless rgb/depth/intrinsics are consistent."""
+    if not isinstance(rgb, np.ndarray) or rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise InputError(f"rgb must be an HxWx3 array, got shape {getattr(rgb, 'shape', None)}")
+    if rgb.dtype != np.uint8:
+        raise InputError(f"rgb must be uint8, got {rgb.dtype}")
+    if intrinsics is None:
+        raise InputError("intrinsics are missing")
+    if not isinstance(intrinsics, Intrinsics):
+        raise InputError(f"intrinsics must be an Intrinsics, got {type(intrinsics).__name__}")
+    h, w = rgb.shape[:2]
+    if (intrinsics.width, intrinsics.height) != (w, h):
+        raise InputError(
+            f"intrinsics are for {intrinsics.width}x{intrinsics.height} but the image is {w}x{h}"
+        )
+    if depth is not None:
+        if not isinstance(depth, np.ndarray) or depth.shape != (h, w):
+            raise InputError(f"depth must have shape {(h, w)}, got {getattr(depth, 'shape', None)}")
+        if depth.dtype != np.float32:
+            raise InputError(f"depth must be float32 metres, got {depth.dtype}")
+        if np.any(depth < 0):
+            raise InputError("depth has negative values (expected metres, 0 or NaN = invalid)")
+
+
+@dataclass
+class Stream:
+    """The frames of one interaction, in time order; the last one is the target frame."""
+
+    frames: list[Frame]
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.frames:
+            raise InputError("a stream needs at least one frame")
+        shape = self.frames[0].shape
+        for i, f in enumerate(self.frames):
+            if f.shape != shape:
+                raise InputError(f"frame {i} has size {f.shape}, the stream is {shape}")
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __iter__(self) -> Iterator[Frame]:
+        return iter(self.frames)
+
+    @property
+    def target(self) -> Frame:
+        t = self.frames[-1]
+        if not t.is_target:
+            raise InputError("the stream has no target frame (last frame has action != -1)")
+        return t
+
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return self.frames[0].intrinsics
+
+    @property
+    def actions(self) -> list[int]:
+        return sorted({f.action for f in self.frames if not f.is_target})
+
+    def action_frames(self, action: int) -> list[Frame]:
+        return [f for f in self.frames if f.action == action]
+
+    @staticmethod
+    def from_frames(frames: Sequence[Frame], **meta: Any) -> Stream:
+        return Stream(list(frames), dict(meta))

@@ -1,0 +1,214 @@
+"""Typed, seeded, printable configuration of a simulated task-board scene.
+
+Frame conventions (world, metres): table top at z = 0, x from the robot towards the board,
+z up.  The board's front face is the plane x = ``board.x``; connectors stick out of it towards
+-x.  ``SceneConfig.validate()`` raises ``ConfigError`` naming the first impossible field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from cablesim.config import check_positive, check_range, from_dict, pretty, to_dict
+from cablesim.errors import ConfigError
+
+BACKGROUNDS = ("wood", "bushes", "cables", "solid")
+
+# Default connector layout on the board: (y, z) of each male connector, two rows of five.
+DEFAULT_CONNECTORS: tuple[tuple[float, float], ...] = tuple(
+    (y, z) for z in (0.86, 0.62) for y in (-0.30, -0.15, 0.0, 0.15, 0.30)
+)
+
+
+@dataclass
+class BoardConfig:
+    """The vertical task board with male garden-hose connectors."""
+
+    x: float = 0.62  # front face of the board
+    width: float = 0.9  # along y
+    height: float = 1.0  # along z, from the table top
+    thickness: float = 0.02
+    background: str = "wood"  # one of BACKGROUNDS
+    solid_rgb: tuple[float, float, float] = (0.55, 0.55, 0.58)  # used by "solid"
+    connectors: tuple[tuple[float, float], ...] = DEFAULT_CONNECTORS
+    connector_length: float = 0.06  # how far a male connector sticks out of the board
+
+    def validate(self) -> None:
+        if self.background not in BACKGROUNDS:
+            raise ConfigError(
+                "board.background",
+                f"unknown background {self.background!r}; choose one of {BACKGROUNDS}",
+            )
+        for name in ("width", "height", "thickness", "connector_length"):
+            check_positive(f"board.{name}", getattr(self, name))
+        if len(self.solid_rgb) != 3 or not all(0 <= c <= 1 for c in self.solid_rgb):
+            raise ConfigError(
+                "board.solid_rgb", f"expected three values in [0, 1], got {self.solid_rgb}"
+            )
+        if not self.connectors:
+            raise ConfigError("board.connectors", "the board needs at least one connector")
+        for i, c in enumerate(self.connectors):
+            if len(c) != 2:
+                raise ConfigError(f"board.connectors[{i}]", f"expected (y, z), got {c!r}")
+            y, z = c
+            if abs(y) > self.width / 2 or not (0 < z < self.height):
+                raise ConfigError(f"board.connectors[{i}]", f"({y}, {z}) is off the board")
+
+
+@dataclass
+class HoseConfig:
+    """Ranges from which each hose's properties are drawn (seeded)."""
+
+    count: int = 4
+    length: tuple[float, float] = (0.6, 1.5)
+    radius: float = 0.0075  # 15 mm thick
+    segment_length: float = 0.03  # target edge length; vertex count follows from the length
+    young: tuple[float, float] = (2e6, 8e6)  # Pa, bending/twist stiffness of the rod
+    poisson: float = 0.3
+    mass_per_metre: float = 0.15  # kg/m
+    damping: float = 0.02  # N s/m on each hose vertex dof (air drag, internal losses)
+    both_ends_probability: float = 0.75  # else attached at one end and hanging free
+    colors: tuple[tuple[float, float, float], ...] = (
+        (0.85, 0.20, 0.15),
+        (0.15, 0.55, 0.20),
+        (0.15, 0.35, 0.80),
+        (0.95, 0.75, 0.10),
+        (0.10, 0.10, 0.10),
+        (0.90, 0.45, 0.10),
+        (0.55, 0.20, 0.65),
+        (0.85, 0.85, 0.85),
+    )
+    color_jitter: float = 0.06
+    friction: float = 0.9
+
+    def validate(self) -> None:
+        if not isinstance(self.count, int) or not 1 <= self.count <= 8:
+            raise ConfigError("hoses.count", f"1 to 8 hoses are supported, got {self.count!r}")
+        check_range("hoses.length", self.length, lo=1e-9)
+        if self.length[0] <= 0:
+            raise ConfigError("hoses.length", f"lengths must be positive, got {self.length}")
+        check_positive("hoses.radius", self.radius)
+        check_positive("hoses.segment_length", self.segment_length)
+        if self.segment_length < 2 * self.radius:
+            raise ConfigError(
+                "hoses.segment_length", f"{self.segment_length} is shorter than the hose diameter"
+            )
+        check_range("hoses.young", self.young, lo=1e-9)
+        if not 0 <= self.poisson < 0.5:
+            raise ConfigError("hoses.poisson", f"must be in [0, 0.5), got {self.poisson}")
+        check_positive("hoses.mass_per_metre", self.mass_per_metre)
+        check_positive("hoses.damping", self.damping, allow_zero=True)
+        if not 0 <= self.both_ends_probability <= 1:
+            raise ConfigError("hoses.both_ends_probability", "must be in [0, 1]")
+        if not self.colors:
+            raise ConfigError("hoses.colors", "need at least one colour")
+
+
+@dataclass
+class CameraConfig:
+    """A fixed RGB-D camera modelled on an Intel RealSense D456.
+
+    The D456 colour sensor sees about 90 x 65 degrees at 1280x800 (16:10); its 4:3 modes crop
+    the sides.  The default 640x480 is the speed/detail compromise (perception at the thesis's
+    ~408x552 scale runs in real time on a CPU); any size up to 1280x720 works: ``fovy`` is kept,
+    the horizontal field follows from the aspect ratio.
+    """
+
+    width: int = 640
+    height: int = 480
+    fovy: float = 58.0  # degrees, vertical field of view
+    position: tuple[float, float, float] = (-0.42, 0.0, 0.62)
+    look_at: tuple[float, float, float] = (0.62, 0.0, 0.46)
+    position_jitter: float = 0.0  # metres, uniform per axis (randomised camera pose)
+    look_at_jitter: float = 0.0
+    depth_noise: bool = False
+    depth_noise_std_per_m2: float = 0.0015  # RealSense-like: sigma = k * z^2
+    near: float = 0.05
+    far: float = 5.0
+
+    def validate(self) -> None:
+        if not (16 <= self.width <= 1280 and 16 <= self.height <= 720):
+            raise ConfigError(
+                "camera.width/height",
+                f"size must be within 16x16 .. 1280x720, got {self.width}x{self.height}",
+            )
+        if not 10 <= self.fovy <= 120:
+            raise ConfigError("camera.fovy", f"must be within 10..120 degrees, got {self.fovy}")
+        check_positive("camera.position_jitter", self.position_jitter, allow_zero=True)
+        check_positive("camera.look_at_jitter", self.look_at_jitter, allow_zero=True)
+        check_positive("camera.depth_noise_std_per_m2", self.depth_noise_std_per_m2, True)
+        if not 0 < self.near < self.far:
+            raise ConfigError("camera.near", "need 0 < near < far")
+
+
+@dataclass
+class RobotConfig:
+    """Where the Panda stands on the table (its base must stay out of the camera's view)."""
+
+    enabled: bool = True
+    base_position: tuple[float, float, float] = (0.22, -0.62, 0.0)
+    base_yaw: float = 1.1  # radians about z; 0 faces +x
+
+    def validate(self) -> None:
+        if len(self.base_position) != 3:
+            raise ConfigError("robot.base_position", "expected (x, y, z)")
+
+
+@dataclass
+class PhysicsConfig:
+    timestep: float = 0.004
+    settle_speed: float = 0.001  # m/s: settled when every hose vertex is slower than this
+    settle_max_time: float = 20.0  # simulated seconds before giving up
+    settle_check_every: float = 0.1
+    gravity: float = -9.81
+    cache: bool = True  # cache the settled state per config (see cablesim.sim.cache)
+
+    def validate(self) -> None:
+        if not 0 < self.timestep <= 0.016:
+            raise ConfigError("physics.timestep", f"must be in (0, 0.016] s, got {self.timestep}")
+        check_positive("physics.settle_speed", self.settle_speed)
+        check_positive("physics.settle_max_time", self.settle_max_time)
+        check_positive("physics.settle_check_every", self.settle_check_every)
+
+
+@dataclass
+class SceneConfig:
+    """Everything that defines a scene; ``seed`` draws the random parts."""
+
+    seed: int = 0
+    board: BoardConfig = field(default_factory=BoardConfig)
+    hoses: HoseConfig = field(default_factory=HoseConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
+    robot: RobotConfig = field(default_factory=RobotConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+
+    def validate(self) -> SceneConfig:
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
+        self.board.validate()
+        self.hoses.validate()
+        self.camera.validate()
+        self.robot.validate()
+        self.physics.validate()
+        if self.hoses.count > len(self.board.connectors):
+            raise ConfigError(
+                "hoses.count",
+                f"{self.hoses.count} hoses need at least {self.hoses.count} connectors, "
+                f"the board has {len(self.board.connectors)}",
+            )
+        return self
+
+    def replace(self, **changes: Any) -> SceneConfig:
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return to_dict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> SceneConfig:
+        return from_dict(cls, data)
+
+    def __str__(self) -> str:
+        return pretty(self)

@@ -1,0 +1,152 @@
+"""Seeded scene layout: which connectors each hose uses, its length, colour, stiffness and
+start shape.  Pure NumPy, independent of MuJoCo, so it is cheap to test and to print.
+
+A hose is attached at its first end to the coupling on connector ``ends[0]`` and, when
+``len(ends) == 2``, at its far end to connector ``ends[1]``.  Start shapes hang in front of the
+board, each hose bulging out by its own distance (so no two start shapes intersect); what
+would fall below the table is laid on it, each hose at its own height.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cablesim.sim.config import SceneConfig
+
+FEMALE_LENGTH = 0.05  # the female coupling on a hose end (mesh length)
+FEMALE_OVERLAP = 0.014  # how far the coupling overlaps the male thread
+
+
+@dataclass(frozen=True)
+class HoseSpec:
+    index: int
+    name: str
+    length: float
+    n_vertices: int
+    rgb: tuple[float, float, float]
+    young: float
+    ends: tuple[int, ...]  # connector indices
+    bulge: float  # metres in front of the connector tips
+    floor: float  # height at which the part that reaches the table lies
+
+    @property
+    def both_ends(self) -> bool:
+        return len(self.ends) == 2
+
+
+@dataclass(frozen=True)
+class CameraPose:
+    position: np.ndarray  # (3,) world
+    look_at: np.ndarray  # (3,) world
+
+
+def rng_streams(seed: int) -> dict[str, np.random.Generator]:
+    """Independent generators for each random part, so changing one part leaves the others."""
+    names = ("hoses", "camera", "depth_noise", "episode")
+    children = np.random.SeedSequence(seed).spawn(len(names))
+    return {n: np.random.default_rng(c) for n, c in zip(names, children, strict=True)}
+
+
+def attach_point(cfg: SceneConfig, connector: int) -> np.ndarray:
+    """World position where a hose end sits on a connector (the coupling's outer end)."""
+    y, z = cfg.board.connectors[connector]
+    x = cfg.board.x - cfg.board.connector_length + FEMALE_OVERLAP - FEMALE_LENGTH
+    return np.array([x, y, z])
+
+
+def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
+    h = cfg.hoses
+    rng = rng_streams(cfg.seed)["hoses"]
+    free = list(range(len(cfg.board.connectors)))
+    colour_order = rng.permutation(len(h.colors))
+    specs = []
+    lengths = rng.uniform(h.length[0], h.length[1], h.count)
+    youngs = np.exp(rng.uniform(np.log(h.young[0]), np.log(h.young[1]), h.count))
+    bulge_rank = rng.permutation(h.count)
+    for i in range(h.count):
+        a = free.pop(int(rng.integers(0, len(free))))
+        ends: tuple[int, ...] = (a,)
+        want_both = rng.random() < h.both_ends_probability
+        if want_both:
+            pa = attach_point(cfg, a)
+            ok = [
+                c
+                for c in free
+                if 0.12 < np.linalg.norm(attach_point(cfg, c) - pa) < 0.8 * lengths[i]
+            ]
+            # leave enough connectors for the hoses still to come
+            if ok and len(free) - 1 >= h.count - i - 1:
+                b = ok[int(rng.integers(0, len(ok)))]
+                free.remove(b)
+                ends = (a, b)
+        base = np.array(h.colors[int(colour_order[i % len(colour_order)])], float)
+        rgb = np.clip(base + rng.uniform(-h.color_jitter, h.color_jitter, 3), 0, 1)
+        n_vert = max(8, int(round(lengths[i] / h.segment_length)) + 1)
+        rank = int(bulge_rank[i])
+        specs.append(
+            HoseSpec(
+                index=i,
+                name=f"hose{i}",
+                length=float(lengths[i]),
+                n_vertices=n_vert,
+                rgb=(float(rgb[0]), float(rgb[1]), float(rgb[2])),
+                young=float(youngs[i]),
+                ends=ends,
+                bulge=0.012 + (2.4 * h.radius + 0.004) * rank,
+                floor=h.radius + 0.004 + 2.6 * h.radius * rank,
+            )
+        )
+    return specs
+
+
+def sample_camera(cfg: SceneConfig) -> CameraPose:
+    rng = rng_streams(cfg.seed)["camera"]
+    c = cfg.camera
+    pos = np.asarray(c.position, float) + rng.uniform(-1, 1, 3) * c.position_jitter
+    look = np.asarray(c.look_at, float) + rng.uniform(-1, 1, 3) * c.look_at_jitter
+    return CameraPose(pos, look)
+
+
+def _resample(points: np.ndarray, n: int) -> np.ndarray:
+    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    s = np.concatenate([[0], np.cumsum(seg)])
+    t = np.linspace(0, s[-1], n)
+    return np.stack([np.interp(t, s, points[:, k]) for k in range(3)], 1)
+
+
+def _arc_length(points: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+
+
+def start_shape(cfg: SceneConfig, spec: HoseSpec) -> np.ndarray:
+    """(n_vertices, 3) start positions with (nearly) the hose's arc length between vertices."""
+    pa = attach_point(cfg, spec.ends[0])
+    t = np.linspace(0, 1, 400)
+    if spec.both_ends:
+        pb = attach_point(cfg, spec.ends[1])
+
+        def curve(sag: float) -> np.ndarray:
+            p = pa[None] * (1 - t[:, None]) + pb[None] * t[:, None]
+            p[:, 2] -= sag * 4 * t * (1 - t)
+            p[:, 0] -= spec.bulge * np.sin(np.pi * t)
+            return p
+
+        lo, hi = 0.0, 10.0
+        for _ in range(60):  # the sag whose parabola has the hose's length
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _arc_length(curve(mid)) < spec.length else (lo, mid)
+        pts = curve(0.5 * (lo + hi))
+    else:
+        s = t * spec.length
+        pts = np.stack(
+            [pa[0] - spec.bulge * np.minimum(1, s / 0.05), np.full_like(s, pa[1]), pa[2] - s], 1
+        )
+    # what would go through the table is laid on it, running towards the robot (-x)
+    below = pts[:, 2] < spec.floor
+    if below.any():
+        drop = spec.floor - pts[below, 2]
+        pts[below, 2] = spec.floor
+        pts[below, 0] -= drop
+    return _resample(pts, spec.n_vertices)

@@ -1,0 +1,331 @@
+"""The simulated world: a MuJoCo model of the table, the task board, the hoses, the Panda and
+the RGB-D camera, built from a ``SceneConfig`` and settled before anything is recorded.
+
+    world = World.build(SceneConfig(seed=3))   # compiled, start shapes set, settled (cached)
+    world.step(10)                             # raises PhysicsDivergedError on NaN/instability
+    world.hose_vertices(0)                     # (V, 3) world positions of hose 0's rod
+
+Each hose is a MuJoCo 4.0 1D ``flexcomp`` (rod elasticity, integrator ``discrete``).  The rod is
+built straight (its rest shape), then bent into its start shape through the vertex joints; a
+far end attached to a second connector is held by a ``connect`` equality (SPEC section 9).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from cablesim.errors import PhysicsDivergedError
+from cablesim.sim import assets
+from cablesim.sim.config import SceneConfig
+from cablesim.sim.layout import (
+    FEMALE_OVERLAP,
+    CameraPose,
+    HoseSpec,
+    sample_camera,
+    sample_hoses,
+    start_shape,
+)
+
+CAMERA_NAME = "rgbd"
+_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQACC,
+    mujoco.mjtWarning.mjWARN_CNSTRFULL,
+    mujoco.mjtWarning.mjWARN_CONTACTFULL,
+)
+
+
+@dataclass(frozen=True)
+class Hose:
+    """A hose in the compiled model."""
+
+    spec: HoseSpec
+    flex_id: int
+    vert_adr: int  # first vertex in data.flexvert_xpos
+    n_vertices: int
+    vertex_bodies: np.ndarray  # body id of each vertex (0 = pinned to the world)
+    end_equality: int | None  # id of the connect equality holding the far end
+
+
+def look_at_frame(position: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """3x3 rotation whose columns are the OpenCV camera axes (x right, y down, z forward)."""
+    fwd = np.asarray(target, float) - np.asarray(position, float)
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(fwd, right)
+    return np.stack([right, down, fwd], 1)
+
+
+def _fmt(v) -> str:
+    return " ".join(f"{float(x):.9g}" for x in np.ravel(v))
+
+
+def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
+    b, h = cfg.board, cfg.hoses
+    R = look_at_frame(cam.position, cam.look_at)
+    tex = ""
+    if b.background == "solid":
+        board_mat = f'<material name="board" rgba="{_fmt(b.solid_rgb)} 1" specular="0.1"/>'
+    else:
+        tex = f'<texture name="board_tex" type="2d" file="{assets.texture_path(b.background)}"/>'
+        board_mat = '<material name="board" texture="board_tex" texrepeat="1 1" specular="0.1"/>'
+    conn = []
+    x_tip = b.x - b.connector_length
+    for i, (y, z) in enumerate(b.connectors):
+        conn.append(
+            f'<geom name="connector{i}" type="mesh" mesh="male" pos="{b.x:.6g} {y:.6g} {z:.6g}" '
+            f'quat="0 0.70710678 0 0.70710678" material="brass" contype="0" conaffinity="0"/>'
+        )
+    couplings, flexes, equalities = [], [], []
+    for s in hoses:
+        for k, c in enumerate(s.ends):
+            y, z = b.connectors[c]
+            x0 = x_tip + FEMALE_OVERLAP
+            couplings.append(
+                f'<geom name="{s.name}_coupling{k}" type="mesh" mesh="female" '
+                f'pos="{x0:.6g} {y:.6g} {z:.6g}" quat="0 0.70710678 0 0.70710678" '
+                f'rgba="{_fmt(np.clip(np.array(s.rgb) * 0.7 + 0.15, 0, 1))} 1" '
+                f'contype="0" conaffinity="0"/>'
+            )
+        top = start_shape(cfg, s)[0]
+        spacing = s.length / (s.n_vertices - 1)
+        mass = h.mass_per_metre * s.length
+        # straight rod hanging from its first end: grid x axis -> world -z
+        centre = top - np.array([0, 0, spacing * (s.n_vertices - 1) / 2])
+        pins = "0" if s.both_ends or True else ""
+        flexes.append(f"""
+    <flexcomp name="{s.name}" type="grid" count="{s.n_vertices} 1 1" spacing="{spacing:.9g} 1 1"
+              pos="{_fmt(centre)}" quat="0.70710678 0 0.70710678 0" dim="1" dof="full"
+              radius="{h.radius}" rgba="{_fmt(s.rgb)} 1" mass="{mass:.6g}">
+      <edge equality="true" solimp="0.99 0.999 0.001" solref="0.004 1" damping="0"/>
+      <elasticity young="{s.young:.6g}" poisson="{h.poisson}" damping="0.0005"/>
+      <contact condim="3" solref="0.004 1" solimp="0.95 0.99 0.001" friction="{h.friction} 0.005 0.0001"
+               selfcollide="none" margin="0.002"/>
+      <pin id="{pins}"/>
+    </flexcomp>""")
+        if s.both_ends:
+            equalities.append(
+                f'<connect name="{s.name}_far_end" body1="{s.name}_{s.n_vertices - 1}" '
+                f'body2="world" anchor="0 0 0" solref="0.004 1" solimp="0.99 0.999 0.001"/>'
+            )
+    cam_xy = np.concatenate([R[:, 0], -R[:, 1]])
+    return f"""
+<mujoco model="cablesim_task_board">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{cfg.physics.timestep}" integrator="discrete" gravity="0 0 {cfg.physics.gravity}"
+          cone="elliptic" impratio="2"/>
+  <size memory="64M"/>
+  <visual>
+    <global offwidth="{max(1280, cfg.camera.width)}" offheight="{max(720, cfg.camera.height)}"/>
+    <quality shadowsize="0"/>
+    <map znear="{cfg.camera.near / 5:.6g}" zfar="{cfg.camera.far / 5:.6g}"/>
+    <headlight ambient="0.35 0.35 0.35" diffuse="0.35 0.35 0.35" specular="0.05 0.05 0.05"/>
+  </visual>
+  <default>
+    <geom solref="0.004 1"/>
+  </default>
+  <asset>
+    <mesh name="male" file="{assets.mesh_path("male")}"/>
+    <mesh name="female" file="{assets.mesh_path("female")}"/>
+    <texture name="table_tex" type="2d" builtin="checker" rgb1="0.42 0.40 0.38" rgb2="0.46 0.44 0.42"
+             width="256" height="256" mark="random" random="0.05" markrgb="0.3 0.3 0.3"/>
+    <material name="table" texture="table_tex" texrepeat="6 6" specular="0.05"/>
+    <material name="brass" rgba="0.80 0.66 0.30 1" specular="0.5" shininess="0.6"/>
+    <material name="floor" rgba="0.25 0.25 0.27 1"/>
+    {tex}
+    {board_mat}
+  </asset>
+  <worldbody>
+    <light name="key" pos="-0.6 -0.4 2.2" dir="0.45 0.2 -0.87" directional="true" castshadow="false"
+           diffuse="0.55 0.55 0.55" specular="0.1 0.1 0.1"/>
+    <geom name="floor" type="plane" size="3 3 0.1" pos="0 0 -0.75" material="floor" contype="0" conaffinity="0"/>
+    <geom name="table" type="box" size="0.75 0.85 0.02" pos="0.15 0 -0.02" material="table" friction="0.8"/>
+    <geom name="board" type="box" size="{b.thickness / 2:.6g} {b.width / 2:.6g} {b.height / 2:.6g}"
+          pos="{b.x + b.thickness / 2:.6g} 0 {b.height / 2:.6g}" material="board" friction="0.6"/>
+    {"".join(conn)}
+    {"".join(couplings)}
+    <camera name="{CAMERA_NAME}" mode="fixed" pos="{_fmt(cam.position)}" xyaxes="{_fmt(cam_xy)}"
+            fovy="{cfg.camera.fovy}"/>
+    {"".join(flexes)}
+  </worldbody>
+  <equality>
+    {"".join(equalities)}
+  </equality>
+</mujoco>"""
+
+
+def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose], damping: float) -> None:
+    """Velocity damping on every hose dof (air drag and the hose's internal losses)."""
+    names = tuple(h.spec.name + "_" for h in hoses)
+    for j in range(model.njnt):
+        body = model.body(model.jnt_bodyid[j]).name
+        if body.startswith(names):
+            adr = model.jnt_dofadr[j]
+            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
+                model.dof_damping[adr] = damping
+            elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
+                model.dof_damping[adr] = damping * 1e-4
+
+
+class World:
+    """A compiled, settled scene.  Build with ``World.build(cfg)``."""
+
+    def __init__(
+        self,
+        cfg: SceneConfig,
+        spec: mujoco.MjSpec,
+        model: mujoco.MjModel,
+        hoses: list[Hose],
+        camera_pose: CameraPose,
+        panda=None,
+        panda_base: tuple[np.ndarray, np.ndarray] | None = None,
+    ):
+        self.cfg = cfg
+        self.spec = spec
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.hoses = hoses
+        self.camera_pose = camera_pose
+        self.camera_id = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA_NAME)
+        self.panda = panda
+        self.panda_base = panda_base
+        R = look_at_frame(camera_pose.position, camera_pose.look_at)
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, camera_pose.position
+        self.T_world_camera = T
+        self._warn_counts = np.zeros(len(_WARNINGS), int)
+        self._settled_state: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ building
+    @classmethod
+    def build(cls, cfg: SceneConfig | None = None, settle: bool = True) -> World:
+        cfg = (cfg or SceneConfig()).validate()
+        hose_specs = sample_hoses(cfg)
+        cam = sample_camera(cfg)
+        spec = mujoco.MjSpec.from_string(_scene_xml(cfg, hose_specs, cam))
+        panda = panda_base = None
+        if cfg.robot.enabled:
+            from cablesim.sim.panda import attach_panda
+
+            yaw = cfg.robot.base_yaw
+            quat = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+            panda = attach_panda(
+                spec, pos=tuple(cfg.robot.base_position), quat=quat, prefix="panda/"
+            )
+            panda_base = (np.array(cfg.robot.base_position, float), np.array(quat))
+        try:
+            model = spec.compile()
+        except Exception as e:  # pragma: no cover - names the failing part for the user
+            raise PhysicsDivergedError(f"the scene failed to compile: {e}") from e
+        hoses = []
+        for s in hose_specs:
+            fid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_FLEX, s.name)
+            adr, num = int(model.flex_vertadr[fid]), int(model.flex_vertnum[fid])
+            eq = (
+                mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, f"{s.name}_far_end")
+                if s.both_ends
+                else None
+            )
+            hoses.append(Hose(s, fid, adr, num, model.flex_vertbodyid[adr : adr + num].copy(), eq))
+        _damp_hoses(model, hoses, cfg.hoses.damping)
+        world = cls(cfg, spec, model, hoses, cam, panda, panda_base)
+        world._set_start_shapes()
+        if settle:
+            from cablesim.sim.settle import settle_world
+
+            settle_world(world)
+        return world
+
+    def _set_start_shapes(self) -> None:
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        if self.panda is not None:
+            self.panda.set_home(m, d)
+        mujoco.mj_kinematics(m, d)
+        for hose in self.hoses:
+            target = start_shape(self.cfg, hose.spec)
+            for k, body in enumerate(hose.vertex_bodies):
+                if body == 0:
+                    continue
+                jadr, jnum = m.body_jntadr[body], m.body_jntnum[body]
+                axes = np.stack(
+                    [d.xmat[body].reshape(3, 3) @ m.jnt_axis[jadr + j] for j in range(jnum)], 1
+                )
+                delta = target[k] - d.xpos[body]
+                sol = np.linalg.lstsq(axes, delta, rcond=None)[0]
+                for j in range(jnum):
+                    d.qpos[m.jnt_qposadr[jadr + j]] += sol[j]
+            if hose.end_equality is not None:
+                # connect: anchor on the far vertex (body1) meets this world point (body2)
+                m.eq_data[hose.end_equality, 3:6] = target[-1]
+        mujoco.mj_forward(m, d)
+
+    # ------------------------------------------------------------------ stepping
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` physics steps; raise ``PhysicsDivergedError`` if the physics blew up."""
+        m, d = self.model, self.data
+        for _ in range(n):
+            mujoco.mj_step(m, d)
+        self.check_diverged()
+
+    def check_diverged(self) -> None:
+        d = self.data
+        counts = np.array([d.warning[w].number for w in _WARNINGS])
+        bad = counts > self._warn_counts
+        self._warn_counts = counts
+        if bad.any() or not np.isfinite(d.qpos).all() or not np.isfinite(d.qvel).all():
+            names = [w.name for w, b in zip(_WARNINGS, bad, strict=True) if b]
+            raise PhysicsDivergedError(
+                f"physics diverged at t={d.time:.3f}s "
+                f"({', '.join(names) or 'non-finite state'}); try a smaller physics.timestep "
+                f"(now {self.model.opt.timestep}) or stiffer hose contacts"
+            )
+
+    # ------------------------------------------------------------------ state
+    def get_state(self) -> np.ndarray:
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        state = np.empty(mujoco.mj_stateSize(self.model, spec))
+        mujoco.mj_getState(self.model, self.data, state, spec)
+        return state
+
+    def set_state(self, state: np.ndarray) -> None:
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        if state.shape != (mujoco.mj_stateSize(self.model, spec),):
+            raise ValueError(
+                f"state has shape {state.shape}, the model needs "
+                f"({mujoco.mj_stateSize(self.model, spec)},)"
+            )
+        mujoco.mj_setState(self.model, self.data, state, spec)
+        mujoco.mj_forward(self.model, self.data)
+
+    def reset(self) -> None:
+        """Back to the settled state (bit for bit)."""
+        if self._settled_state is None:
+            self._set_start_shapes()
+        else:
+            self.set_state(self._settled_state)
+        self._warn_counts = np.array([self.data.warning[w].number for w in _WARNINGS])
+
+    # ------------------------------------------------------------------ hoses
+    def hose_vertices(self, i: int) -> np.ndarray:
+        h = self.hoses[i]
+        return self.data.flexvert_xpos[h.vert_adr : h.vert_adr + h.n_vertices].copy()
+
+    def all_hose_vertices(self) -> np.ndarray:
+        return np.concatenate([self.hose_vertices(i) for i in range(len(self.hoses))])
+
+    def world_to_camera(self, points: np.ndarray) -> np.ndarray:
+        T = self.T_world_camera
+        return (np.asarray(points) - T[:3, 3]) @ T[:3, :3]
+
+    def camera_to_world(self, points: np.ndarray) -> np.ndarray:
+        T = self.T_world_camera
+        return np.asarray(points) @ T[:3, :3].T + T[:3, 3]

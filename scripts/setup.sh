@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Set up cablesim on a fresh Debian/Ubuntu machine: headless GL libraries (when missing),
+# a virtual environment in .venv and the package itself (editable).
+#   bash scripts/setup.sh          # runtime only
+#   bash scripts/setup.sh dev      # + test tools and the optional torch back end
+set -euo pipefail
+cd "$(dirname "$0")/.."
+extras="${1:-}"
+
+need_debs=()
+have_lib() { ldconfig -p 2>/dev/null | grep -q "$1"; }
+have_lib "libEGL.so.1" || need_debs+=(libegl1)
+have_lib "libGL.so.1" || need_debs+=(libgl1)
+have_lib "libOSMesa.so" || need_debs+=(libosmesa6)
+[ -e /usr/lib/x86_64-linux-gnu/libEGL_mesa.so.0 ] || [ -e /usr/lib/aarch64-linux-gnu/libEGL_mesa.so.0 ] \
+  || need_debs+=(libegl-mesa0 libgl1-mesa-dri)
+if [ ${#need_debs[@]} -gt 0 ]; then
+  echo "[setup] installing headless GL packages: ${need_debs[*]}"
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_debs[@]}" >/dev/null
+fi
+
+PY="${PYTHON:-python3.11}"
+command -v "$PY" >/dev/null 2>&1 || PY=python3
+if [ ! -x .venv/bin/python ]; then
+  echo "[setup] creating .venv with $PY"
+  "$PY" -m venv .venv
+fi
+.venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
+spec="."
+case "$extras" in
+  dev) spec=".[dev,torch]" ;;
+  "") spec="." ;;
+  *) spec=".[$extras]" ;;
+esac
+echo "[setup] installing cablesim $spec"
+.venv/bin/python -m pip install -q -e "$spec" 2>&1 | grep -v '^WARNING: Location' || true
+.venv/bin/python -c "import cablesim, mujoco; print('[setup] cablesim', cablesim.__version__, 'mujoco', mujoco.__version__, 'GL', cablesim.gl.select_backend())"
