@@ -69,13 +69,16 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
         a = free.pop(int(rng.integers(0, len(free))))
         ends: tuple[int, ...] = (a,)
         want_both = rng.random() < h.both_ends_probability
+        rank = int(bulge_rank[i])
+        bulge = 0.012 + (2.4 * h.radius + 0.004) * rank
+        floor = h.radius + 0.004 + 2.6 * h.radius * rank
         if want_both:
             pa = attach_point(cfg, a)
-            ok = [
-                c
-                for c in free
-                if 0.12 < np.linalg.norm(attach_point(cfg, c) - pa) < 0.8 * lengths[i]
-            ]
+            ok = [c for c in free if 0.12 < np.linalg.norm(attach_point(cfg, c) - pa)
+                  < 0.8 * lengths[i]]
+            # a hose attached at both ends must hang clear of the table
+            ok = [c for c in ok if _lowest_point(pa, attach_point(cfg, c), lengths[i], bulge)
+                  > floor + 0.02]
             # leave enough connectors for the hoses still to come
             if ok and len(free) - 1 >= h.count - i - 1:
                 b = ok[int(rng.integers(0, len(ok)))]
@@ -84,7 +87,6 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
         base = np.array(h.colors[int(colour_order[i % len(colour_order)])], float)
         rgb = np.clip(base + rng.uniform(-h.color_jitter, h.color_jitter, 3), 0, 1)
         n_vert = max(8, int(round(lengths[i] / h.segment_length)) + 1)
-        rank = int(bulge_rank[i])
         specs.append(
             HoseSpec(
                 index=i,
@@ -120,33 +122,46 @@ def _arc_length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
 
 
+def _hanging_curve(pa: np.ndarray, pb: np.ndarray, length: float, bulge: float,
+                   n: int = 400) -> np.ndarray:
+    """A parabola from ``pa`` to ``pb``, bulging out by ``bulge``, as a chain of ``n`` points
+    equally spaced along it whose total length is ``length``."""
+    t = np.linspace(0, 1, 400)
+
+    def curve(sag: float) -> np.ndarray:
+        p = pa[None] * (1 - t[:, None]) + pb[None] * t[:, None]
+        p[:, 2] -= sag * 4 * t * (1 - t)
+        p[:, 0] -= bulge * np.minimum(1, np.minimum(t, 1 - t) / 0.08)  # out within ~5 cm
+        return _resample(p, n)
+
+    lo, hi = 0.0, 10.0
+    for _ in range(60):  # bisection on the sag
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _arc_length(curve(mid)) < length else (lo, mid)
+    return curve(0.5 * (lo + hi))
+
+
+def _lowest_point(pa: np.ndarray, pb: np.ndarray, length: float, bulge: float) -> float:
+    return float(_hanging_curve(pa, pb, length, bulge)[:, 2].min())
+
+
 def start_shape(cfg: SceneConfig, spec: HoseSpec) -> np.ndarray:
     """(n_vertices, 3) start positions with (nearly) the hose's arc length between vertices."""
     pa = attach_point(cfg, spec.ends[0])
-    t = np.linspace(0, 1, 400)
     if spec.both_ends:
-        pb = attach_point(cfg, spec.ends[1])
-
-        def curve(sag: float) -> np.ndarray:
-            p = pa[None] * (1 - t[:, None]) + pb[None] * t[:, None]
-            p[:, 2] -= sag * 4 * t * (1 - t)
-            p[:, 0] -= spec.bulge * np.sin(np.pi * t)
-            return p
-
-        lo, hi = 0.0, 10.0
-        for _ in range(60):  # the sag whose parabola has the hose's length
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if _arc_length(curve(mid)) < spec.length else (lo, mid)
-        pts = curve(0.5 * (lo + hi))
-    else:
-        s = t * spec.length
-        pts = np.stack(
-            [pa[0] - spec.bulge * np.minimum(1, s / 0.05), np.full_like(s, pa[1]), pa[2] - s], 1
-        )
+        return _hanging_curve(pa, attach_point(cfg, spec.ends[1]), spec.length, spec.bulge,
+                              spec.n_vertices)
+    s = np.linspace(0, 1.5 * spec.length, 900)
+    pts = np.stack([pa[0] - spec.bulge * np.minimum(1, s / 0.05), np.full_like(s, pa[1]),
+                    pa[2] - s], 1)
     # what would go through the table is laid on it, running towards the robot (-x)
     below = pts[:, 2] < spec.floor
     if below.any():
         drop = spec.floor - pts[below, 2]
         pts[below, 2] = spec.floor
         pts[below, 0] -= drop
+    # cut the path at the hose's length
+    cum = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    end = np.array([np.interp(spec.length, cum, pts[:, k]) for k in range(3)])
+    pts = np.vstack([pts[cum < spec.length], end])
     return _resample(pts, spec.n_vertices)

@@ -1,0 +1,139 @@
+"""Scene building: config validation, seeded layout, settling, hoses hanging without stretch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cablesim.errors import ConfigError
+from cablesim.sim.config import (
+    BoardConfig,
+    CameraConfig,
+    HoseConfig,
+    PhysicsConfig,
+    RobotConfig,
+    SceneConfig,
+)
+from cablesim.sim.layout import sample_hoses, start_shape
+
+
+def _cfg(**kw) -> SceneConfig:
+    kw.setdefault("robot", RobotConfig(enabled=False))
+    return SceneConfig(**kw)
+
+
+@pytest.mark.parametrize(
+    ("cfg", "field"),
+    [
+        (SceneConfig(hoses=HoseConfig(length=(-0.5, 1.0))), "hoses.length"),
+        (SceneConfig(hoses=HoseConfig(length=(1.2, 0.8))), "hoses.length"),
+        (SceneConfig(hoses=HoseConfig(count=9)), "hoses.count"),
+        (SceneConfig(hoses=HoseConfig(count=0)), "hoses.count"),
+        (SceneConfig(board=BoardConfig(background="marble")), "board.background"),
+        (SceneConfig(hoses=HoseConfig(count=3), board=BoardConfig(connectors=((0, 0.8), (0.1, 0.8)))),
+         "hoses.count"),
+        (SceneConfig(board=BoardConfig(connectors=((2.0, 0.5),))), "board.connectors[0]"),
+        (SceneConfig(camera=CameraConfig(width=1920, height=1080)), "camera.width/height"),
+        (SceneConfig(physics=PhysicsConfig(timestep=0.05)), "physics.timestep"),
+        (SceneConfig(seed=-1), "seed"),
+    ],
+)
+def test_impossible_config_names_the_field(cfg: SceneConfig, field: str) -> None:
+    with pytest.raises(ConfigError) as e:
+        cfg.validate()
+    assert e.value.field == field
+    assert field in str(e.value)
+
+
+def test_config_round_trips_and_prints() -> None:
+    cfg = SceneConfig(seed=7, hoses=HoseConfig(count=3), board=BoardConfig(background="bushes"))
+    again = SceneConfig.from_dict(cfg.to_dict())
+    assert again == cfg
+    assert '"background": "bushes"' in str(cfg)
+    with pytest.raises(ConfigError, match="unknown field"):
+        SceneConfig.from_dict({"seed": 1, "hosez": {}})
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_layout_is_seeded_and_within_ranges(seed: int) -> None:
+    cfg = _cfg(seed=seed).validate()
+    a, b = sample_hoses(cfg), sample_hoses(cfg)
+    assert a == b
+    used = [c for s in a for c in s.ends]
+    assert len(used) == len(set(used)), "two hose ends on one connector"
+    for s in a:
+        assert cfg.hoses.length[0] <= s.length <= cfg.hoses.length[1]
+        pts = start_shape(cfg, s)
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        assert seg.sum() == pytest.approx(s.length, rel=0.02)
+        assert pts[:, 2].min() >= cfg.hoses.radius  # nothing starts inside the table
+    assert sample_hoses(_cfg(seed=seed + 100)) != a
+
+
+def test_start_shapes_do_not_intersect() -> None:
+    for seed in range(5):
+        cfg = _cfg(seed=seed).validate()
+        shapes = [start_shape(cfg, s) for s in sample_hoses(cfg)]
+        for i in range(len(shapes)):
+            for j in range(i + 1, len(shapes)):
+                d = np.linalg.norm(shapes[i][:, None] - shapes[j][None], axis=2)
+                # at most a shallow overlap (where one hose passes right in front of another's
+                # coupling) that contacts push apart; never one rod through another
+                assert d[1:-1, 1:-1].min() > 1.5 * cfg.hoses.radius, (seed, i, j)
+
+
+@pytest.fixture(scope="module")
+def settled(tmp_path_factory):
+    import os
+
+    os.environ["CABLESIM_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+    from cablesim.sim.world import World
+
+    cfg = _cfg(seed=1, camera=CameraConfig(width=160, height=120))
+    return World.build(cfg)
+
+
+def test_settled_scene_is_slow_and_unstretched(settled) -> None:
+    from cablesim.sim.settle import max_vertex_speed
+
+    world = settled
+    assert max_vertex_speed(world) < world.cfg.physics.settle_speed
+    for i, hose in enumerate(world.hoses):
+        v = world.hose_vertices(i)
+        length = np.linalg.norm(np.diff(v, axis=0), axis=1).sum()
+        assert length == pytest.approx(hose.spec.length, rel=0.002), "hose stretched"
+        assert v[:, 2].min() > 0, "hose fell through the table"
+        assert v[:, 0].max() < world.cfg.board.x, "hose went through the board"
+
+
+def test_settle_cache_gives_the_same_state(settled) -> None:
+    from cablesim.sim.world import World
+
+    again = World.build(settled.cfg)  # loads the cache written by the fixture
+    np.testing.assert_array_equal(again.get_state(), settled.get_state())
+    fresh = World.build(settled.cfg.replace(physics=PhysicsConfig(cache=False)))
+    np.testing.assert_array_equal(fresh.get_state(), settled.get_state())
+
+
+def test_far_ends_stay_on_their_connectors(settled) -> None:
+    from cablesim.sim.layout import attach_point
+
+    world = settled
+    world.step(100)
+    for i, hose in enumerate(world.hoses):
+        v = world.hose_vertices(i)
+        np.testing.assert_allclose(v[0], attach_point(world.cfg, hose.spec.ends[0]), atol=1e-6)
+        if hose.spec.both_ends:
+            np.testing.assert_allclose(v[-1], attach_point(world.cfg, hose.spec.ends[1]), atol=2e-3)
+    world.reset()
+
+
+def test_diverged_physics_raises_a_named_error(settled) -> None:
+    from cablesim.errors import PhysicsDivergedError
+
+    world = settled
+    world.data.qvel[:] = np.nan
+    with pytest.raises(PhysicsDivergedError, match="diverged"):
+        world.step(1)
+    world.reset()
+    world.step(1)  # usable again after reset
