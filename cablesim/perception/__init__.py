@@ -1,0 +1,161 @@
+"""Perception of the grasped hose from a frame stream (SPEC sections 2, 4, 5, 7, 8).
+
+Plain NumPy/OpenCV; torch is imported lazily by the RAFT back end only; MuJoCo never.
+
+Typical use::
+
+    from cablesim.perception import segment_stream, DISFlow, GraspSampler
+    seg = segment_stream(stream, method="correlation", flow=DISFlow())
+    votes = seg.votes                       # actions supporting each target pixel
+    res = GraspSampler(reachability=robot_check).propose(votes, target.depth, target.intrinsics)
+"""
+
+from cablesim.perception.actions import (
+    action_direction,
+    gripper_displacements,
+    subsample_by_gripper,
+)
+from cablesim.perception.correlation import (
+    AblationParams,
+    CorrelationAccumulator,
+    CorrelationParams,
+    CorrelationResult,
+    moments_to_result,
+)
+from cablesim.perception.flow import (
+    DISFlow,
+    FarnebackFlow,
+    FlowEstimator,
+    GateParams,
+    OracleFlow,
+    make_flow,
+    texture_mask,
+)
+from cablesim.perception.formats import (
+    read_flow_png,
+    read_sequence,
+    write_flow_png,
+    write_sequence,
+)
+from cablesim.perception.frames import (
+    LABEL_BACKGROUND,
+    LABEL_ROBOT,
+    TARGET_ACTION,
+    Frame,
+    FrameTruth,
+    Intrinsics,
+    Stream,
+)
+from cablesim.perception.geometry import (
+    SegmentPose,
+    eccentricity,
+    geometric_median,
+    segment_pose,
+)
+from cablesim.perception.grasp_sampler import (
+    Candidate,
+    GraspProposal,
+    GraspSampler,
+    GraspSamplerParams,
+    SamplingResult,
+)
+from cablesim.perception.metrics import (
+    BETAS,
+    GRADES,
+    MaskScores,
+    confusion,
+    f_beta,
+    flow_epe,
+    grade_proposal,
+    mean_scores,
+    score_mask,
+)
+from cablesim.perception.pipeline import (
+    METHODS,
+    StreamSegmentation,
+    StreamStatistics,
+    compute_statistics,
+    iter_flows,
+    masks_from_statistics,
+    segment_from_statistics,
+    segment_stream,
+)
+from cablesim.perception.segmentation import (
+    SegmentationAccumulator,
+    SegmentationParams,
+    SegmentationResult,
+)
+from cablesim.perception.tuning import TuningResult, tune_thresholds, tuning_table
+from cablesim.perception.votes import (
+    VoteAccumulator,
+    intersection,
+    merge_votes,
+    union,
+    vote_image,
+)
+
+__all__ = [
+    "BETAS",
+    "GRADES",
+    "LABEL_BACKGROUND",
+    "LABEL_ROBOT",
+    "METHODS",
+    "TARGET_ACTION",
+    "AblationParams",
+    "Candidate",
+    "CorrelationAccumulator",
+    "CorrelationParams",
+    "CorrelationResult",
+    "DISFlow",
+    "FarnebackFlow",
+    "FlowEstimator",
+    "Frame",
+    "FrameTruth",
+    "GateParams",
+    "GraspProposal",
+    "GraspSampler",
+    "GraspSamplerParams",
+    "Intrinsics",
+    "MaskScores",
+    "OracleFlow",
+    "SamplingResult",
+    "SegmentPose",
+    "SegmentationAccumulator",
+    "SegmentationParams",
+    "SegmentationResult",
+    "Stream",
+    "StreamSegmentation",
+    "StreamStatistics",
+    "TuningResult",
+    "VoteAccumulator",
+    "action_direction",
+    "compute_statistics",
+    "confusion",
+    "eccentricity",
+    "f_beta",
+    "flow_epe",
+    "geometric_median",
+    "grade_proposal",
+    "gripper_displacements",
+    "intersection",
+    "iter_flows",
+    "make_flow",
+    "masks_from_statistics",
+    "mean_scores",
+    "merge_votes",
+    "moments_to_result",
+    "read_flow_png",
+    "read_sequence",
+    "score_mask",
+    "segment_from_statistics",
+    "segment_pose",
+    "segment_stream",
+    "subsample_by_gripper",
+    "texture_mask",
+    "tune_thresholds",
+    "tuning_table",
+    "union",
+    "vote_image",
+    "write_flow_png",
+    "write_sequence",
+]

@@ -1,0 +1,308 @@
+"""Stream-level perception: flow for every kept frame, then the per-action methods.
+
+:func:`compute_statistics` runs one pass over a :class:`~cablesim.perception.frames.Stream`:
+per action it keeps the samples where the gripper moved >= ``delta_g`` (SPEC 3.5), computes
+d_g = (g_k - g_1) . u_a, estimates the flow of every kept frame to the target frame and feeds
+the running accumulators.  With ``pipelined=True`` the flow runs in a worker thread (stage 1)
+while the accumulators consume the results in order (stage 2) through a bounded queue; errors
+in either stage propagate and the results are identical to the sequential path.
+
+:func:`segment_stream` turns the statistics into per-action masks and a vote image for one
+method (``"correlation"``, ``"segmentation"`` or ``"ablation"``);
+:func:`masks_from_statistics` re-thresholds cached statistics cheaply (tuning).
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from cablesim.errors import InputError
+from cablesim.perception.actions import (
+    action_direction,
+    subsample_by_gripper,
+)
+from cablesim.perception.correlation import (
+    AblationParams,
+    CorrelationAccumulator,
+    CorrelationParams,
+    CorrelationResult,
+)
+from cablesim.perception.flow import FlowEstimator, make_flow
+from cablesim.perception.frames import Frame, Stream
+from cablesim.perception.segmentation import (
+    SegmentationAccumulator,
+    SegmentationParams,
+    SegmentationResult,
+)
+from cablesim.perception.votes import merge_votes, vote_image
+
+Method = Literal["correlation", "segmentation", "ablation"]
+METHODS: tuple[str, ...] = ("correlation", "segmentation", "ablation")
+
+
+@dataclass
+class Job:
+    """One kept frame: its action, its index among kept samples, d_g and gripper depth."""
+
+    action: int
+    index: int
+    frame: Frame
+    d_g: float
+    z: float
+
+
+@dataclass
+class StreamStatistics:
+    """Per-action statistics of one stream, enough to threshold any method."""
+
+    shape: tuple[int, int]
+    actions: list[int]
+    n_samples: dict[int, int]
+    correlation: dict[int, CorrelationResult] = field(default_factory=dict)
+    segmentation: dict[int, SegmentationResult] = field(default_factory=dict)
+    directions: dict[int, np.ndarray] = field(default_factory=dict)
+    flow: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class StreamSegmentation:
+    """Result of :func:`segment_stream`: per-action masks and their vote image."""
+
+    method: str
+    masks: dict[int, np.ndarray]
+    votes: np.ndarray  # HxW int16
+    stats: StreamStatistics
+    c0: dict[int, np.ndarray] = field(default_factory=dict)
+    r2: dict[int, np.ndarray] = field(default_factory=dict)
+
+    def mask(self, n: int | str = 1) -> np.ndarray:
+        """Merged mask: ``n`` votes (``"union"`` = 1, ``"intersection"`` = all actions)."""
+        return merge_votes(self.votes, n, len(self.masks))
+
+
+def plan_jobs(stream: Stream, delta_g: float = 0.001) -> list[Job]:
+    """Kept frames of every action in stream order, with their d_g and gripper depth."""
+    jobs: list[Job] = []
+    _ = stream.target  # raises if the last frame is not a target frame
+    for a in stream.actions:
+        frames = stream.action_frames(a)
+        kept = subsample_by_gripper(frames, delta_g)
+        u = action_direction(frames)
+        g1 = np.asarray(kept[0].gripper, np.float64)
+        for i, f in enumerate(kept):
+            d = float((np.asarray(f.gripper) - g1) @ u)
+            jobs.append(Job(a, i, f, d, float(f.gripper[2])))
+    return jobs
+
+
+def _flows_sequential(
+    jobs: Sequence[Job], flow: FlowEstimator, target: Frame
+) -> Iterator[tuple[Job, np.ndarray]]:
+    for job in jobs:
+        yield job, flow.frame_flow(job.frame, target)
+
+
+_DONE = object()
+
+
+def _flows_pipelined(
+    jobs: Sequence[Job], flow: FlowEstimator, target: Frame, queue_size: int = 4
+) -> Iterator[tuple[Job, np.ndarray]]:
+    """Stage 1 in a worker thread; yields (job, flow) in job order."""
+    q: queue.Queue = queue.Queue(maxsize=max(1, int(queue_size)))
+    stop = threading.Event()
+
+    def put(item: object) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def worker() -> None:
+        try:
+            for job in jobs:
+                if stop.is_set():
+                    return
+                if not put((job, flow.frame_flow(job.frame, target))):
+                    return
+            put(_DONE)
+        except BaseException as exc:  # noqa: BLE001 - re-raised in the consumer
+            put(exc)
+
+    t = threading.Thread(target=worker, name="cablesim-flow", daemon=True)
+    t.start()
+    try:
+        while True:
+            item = q.get()
+            if item is _DONE:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        t.join(timeout=10.0)
+
+
+def iter_flows(
+    stream: Stream,
+    flow: FlowEstimator | str = "dis",
+    delta_g: float = 0.001,
+    pipelined: bool = True,
+    queue_size: int = 4,
+) -> Iterator[tuple[Job, np.ndarray]]:
+    """(job, flow to target) for every kept frame, in stream order."""
+    est = make_flow(flow)
+    jobs = plan_jobs(stream, delta_g)
+    target = stream.target
+    if pipelined:
+        return _flows_pipelined(jobs, est, target, queue_size)
+    return _flows_sequential(jobs, est, target)
+
+
+def compute_statistics(
+    stream: Stream,
+    flow: FlowEstimator | str = "dis",
+    methods: Sequence[str] = METHODS,
+    correlation: CorrelationParams | AblationParams | None = None,
+    segmentation: SegmentationParams | None = None,
+    delta_g: float = 0.001,
+    pipelined: bool = True,
+    queue_size: int = 4,
+    dtype: type = np.float32,
+) -> StreamStatistics:
+    """One pass over the stream feeding the accumulators the ``methods`` need."""
+    if isinstance(stream, Sequence) and not isinstance(stream, Stream):
+        stream = Stream(list(stream))
+    if not isinstance(stream, Stream):
+        raise InputError(f"stream must be a Stream, got {type(stream).__name__}")
+    for m in methods:
+        if m not in METHODS:
+            raise InputError(f"unknown method {m!r}; choose from {METHODS}")
+    cparams = correlation if correlation is not None else CorrelationParams()
+    if isinstance(cparams, AblationParams):
+        cparams = CorrelationParams(
+            tau_n=cparams.tau_n, depth_mode=cparams.depth_mode, min_samples=cparams.min_samples
+        )
+    sparams = segmentation if segmentation is not None else SegmentationParams()
+    want_corr = "correlation" in methods or "ablation" in methods
+    want_seg = "segmentation" in methods
+    target = stream.target
+    shape = target.shape
+    focal = target.intrinsics.f
+    est = make_flow(flow)
+    if not stream.actions:
+        raise InputError("the stream has no action frames")
+    corr: dict[int, CorrelationAccumulator] = {}
+    seg: dict[int, SegmentationAccumulator] = {}
+    counts: dict[int, int] = {}
+    for job, phi in iter_flows(stream, est, delta_g, pipelined, queue_size):
+        a = job.action
+        if want_corr:
+            if a not in corr:
+                corr[a] = CorrelationAccumulator(shape, focal, cparams, target.depth, dtype)
+            corr[a].update(phi, job.d_g, job.z)
+        if want_seg:
+            if a not in seg:
+                seg[a] = SegmentationAccumulator(shape, sparams)
+            seg[a].update(phi)
+        counts[a] = counts.get(a, 0) + 1
+    actions = sorted(counts)
+    return StreamStatistics(
+        shape=shape,
+        actions=actions,
+        n_samples=counts,
+        correlation={a: acc.result() for a, acc in corr.items()},
+        segmentation={a: acc.result() for a, acc in seg.items()},
+        directions={a: action_direction(stream.action_frames(a)) for a in actions},
+        flow=est.describe(),
+    )
+
+
+def masks_from_statistics(
+    stats: StreamStatistics,
+    method: str,
+    params: CorrelationParams | SegmentationParams | AblationParams | None = None,
+) -> dict[int, np.ndarray]:
+    """Per-action masks of ``method`` from cached statistics."""
+    if method == "correlation":
+        p = params if params is not None else CorrelationParams()
+        if not isinstance(p, CorrelationParams):
+            raise InputError("method 'correlation' needs CorrelationParams")
+        src = stats.correlation
+        if not src:
+            raise InputError("statistics were computed without the correlation method")
+        return {a: src[a].mask(p.c0_min, p.r2_min) for a in stats.actions}
+    if method == "ablation":
+        p = params if params is not None else AblationParams()
+        if not isinstance(p, AblationParams):
+            raise InputError("method 'ablation' needs AblationParams")
+        src = stats.correlation
+        if not src:
+            raise InputError("statistics were computed without the correlation moments")
+        return {a: src[a].ablation_mask(p.std_min) for a in stats.actions}
+    if method == "segmentation":
+        p = params if params is not None else SegmentationParams()
+        if not isinstance(p, SegmentationParams):
+            raise InputError("method 'segmentation' needs SegmentationParams")
+        if not stats.segmentation:
+            raise InputError("statistics were computed without the segmentation method")
+        return {a: stats.segmentation[a].mask(p.tau_v) for a in stats.actions}
+    raise InputError(f"unknown method {method!r}; choose from {METHODS}")
+
+
+def segment_from_statistics(
+    stats: StreamStatistics, method: str = "correlation", params: Any = None
+) -> StreamSegmentation:
+    masks = masks_from_statistics(stats, method, params)
+    votes = vote_image(list(masks.values()))
+    out = StreamSegmentation(method=method, masks=masks, votes=votes, stats=stats)
+    if method in ("correlation", "ablation"):
+        out.c0 = {a: r.c0 for a, r in stats.correlation.items()}
+        out.r2 = {a: r.r2 for a, r in stats.correlation.items()}
+    return out
+
+
+def segment_stream(
+    stream: Stream,
+    method: str = "correlation",
+    flow: FlowEstimator | str = "dis",
+    params: CorrelationParams | SegmentationParams | AblationParams | None = None,
+    delta_g: float = 0.001,
+    pipelined: bool = True,
+    queue_size: int = 4,
+) -> StreamSegmentation:
+    """Segment the grasped hose in the target frame of ``stream`` with one method.
+
+    Returns per-action masks, their vote image, and (correlation/ablation) the c0 and R^2 maps.
+    """
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose from {METHODS}")
+    kw: dict[str, Any] = {}
+    if method == "segmentation":
+        if params is not None and not isinstance(params, SegmentationParams):
+            raise InputError("method 'segmentation' needs SegmentationParams")
+        kw["segmentation"] = params
+    else:
+        if params is not None and not isinstance(params, CorrelationParams | AblationParams):
+            raise InputError(f"method {method!r} needs CorrelationParams or AblationParams")
+        kw["correlation"] = params
+    stats = compute_statistics(
+        stream,
+        flow,
+        methods=(method,),
+        delta_g=delta_g,
+        pipelined=pipelined,
+        queue_size=queue_size,
+        **kw,
+    )
+    return segment_from_statistics(stats, method, params)

@@ -1,0 +1,190 @@
+"""Threshold tuning on validation sequences (SPEC section 7).
+
+Per sequence, cached :class:`~cablesim.perception.pipeline.StreamStatistics` and the truth
+mask suffice: every method's merged mask is ``score(p) > t`` for a per-pixel score, so the
+confusion counts for all thresholds t of a grid follow from one sort per sequence:
+
+- segmentation: score = n-th largest vote fraction over actions, t = tau_v;
+- ablation: score = n-th largest std(d_phi), t = std_min;
+- correlation: for each c0_min, score = n-th largest R^2 among actions with |c0| > c0_min,
+  t = R2_min.
+
+(n = action threshold of the vote merge; 1 = union.)  The thresholds maximising the mean
+F_beta over sequences are chosen per beta.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cablesim.errors import InputError
+from cablesim.perception._checks import as_mask
+from cablesim.perception.correlation import AblationParams, CorrelationParams
+from cablesim.perception.metrics import BETAS, f_beta
+from cablesim.perception.pipeline import StreamStatistics
+from cablesim.perception.segmentation import SegmentationParams
+
+DEFAULT_GRIDS: dict[str, dict[str, np.ndarray]] = {
+    "segmentation": {"tau_v": np.round(np.arange(0.0, 1.0, 0.02), 4)},
+    "correlation": {
+        "c0_min": np.round(np.arange(0.0, 1.0, 0.02), 4),
+        "r2_min": np.round(np.arange(0.0, 1.0, 0.02), 4),
+    },
+    "ablation": {"std_min": np.round(np.arange(0.0, 0.02, 0.0005), 6)},
+}
+
+
+def _nth_largest(stack: np.ndarray, n: int) -> np.ndarray:
+    """n-th largest value along axis 0 (-inf where fewer than n)."""
+    if n > stack.shape[0]:
+        return np.full(stack.shape[1:], -np.inf)
+    return np.sort(stack, axis=0)[stack.shape[0] - n]
+
+
+def _counts_for_thresholds(
+    score: np.ndarray, truth: np.ndarray, thresholds: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """tp(t), fp(t) for mask = score > t, and the number of truth pixels."""
+    pos = np.sort(score[truth].ravel())
+    neg = np.sort(score[~truth].ravel())
+    tp = len(pos) - np.searchsorted(pos, thresholds, side="right")
+    fp = len(neg) - np.searchsorted(neg, thresholds, side="right")
+    return tp.astype(np.float64), fp.astype(np.float64), int(len(pos))
+
+
+def _prf(tp: np.ndarray, fp: np.ndarray, npos: int) -> tuple[np.ndarray, ...]:
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = np.where(tp + fp > 0, tp / (tp + fp), 0.0)
+        r = np.where(npos > 0, tp / max(npos, 1), 0.0)
+        iou = np.where(npos + fp > 0, tp / (npos + fp), 0.0)
+    return p, r, iou
+
+
+def _f_beta_vec(p: np.ndarray, r: np.ndarray, beta: float) -> np.ndarray:
+    f_beta(0.5, 0.5, beta)  # validates beta
+    b2 = beta * beta
+    den = b2 * p + r
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, (1 + b2) * p * r / den, 0.0)
+
+
+@dataclass
+class TuningRow:
+    method: str
+    beta: float
+    params: dict[str, float]
+    precision: float
+    recall: float
+    f_beta: float
+    iou: float
+
+
+@dataclass
+class TuningResult:
+    method: str
+    n: int
+    rows: dict[float, TuningRow] = field(default_factory=dict)
+
+    def params(self, beta: float = 0.4) -> CorrelationParams | SegmentationParams | AblationParams:
+        """Method parameters with the thresholds tuned for ``beta``."""
+        pr = self.rows[beta].params
+        if self.method == "correlation":
+            return CorrelationParams(c0_min=pr["c0_min"], r2_min=pr["r2_min"])
+        if self.method == "segmentation":
+            return SegmentationParams(tau_v=pr["tau_v"])
+        return AblationParams(std_min=pr["std_min"])
+
+
+def _scores_for(
+    stats: StreamStatistics, method: str, n: int, c0_min: float | None = None
+) -> np.ndarray:
+    acts = stats.actions
+    if method == "segmentation":
+        if not stats.segmentation:
+            raise InputError("statistics lack the segmentation method")
+        stack = np.stack([stats.segmentation[a].fraction for a in acts])
+    elif method == "ablation":
+        stack = np.stack([stats.correlation[a].std_dphi for a in acts])
+    elif method == "correlation":
+        stack = np.stack(
+            [
+                np.where(np.abs(stats.correlation[a].c0) > c0_min, stats.correlation[a].r2, -np.inf)
+                for a in acts
+            ]
+        )
+    else:
+        raise InputError(f"unknown method {method!r}")
+    return _nth_largest(stack.astype(np.float64), n)
+
+
+def tune_thresholds(
+    stats: Sequence[StreamStatistics],
+    truths: Sequence[np.ndarray],
+    method: str = "correlation",
+    betas: Sequence[float] = BETAS,
+    n: int = 1,
+    grid: dict[str, np.ndarray] | None = None,
+) -> TuningResult:
+    """Grid search maximising mean F_beta over the sequences, per beta."""
+    if len(stats) != len(truths) or not stats:
+        raise InputError(
+            f"need as many truths as statistics (>0), got {len(stats)} and {len(truths)}"
+        )
+    if method not in DEFAULT_GRIDS:
+        raise InputError(f"unknown method {method!r}")
+    grid = {**DEFAULT_GRIDS[method], **(grid or {})}
+    masks = [
+        as_mask(t, s.shape, name=f"truth {i}")
+        for i, (s, t) in enumerate(zip(stats, truths, strict=True))
+    ]
+    if method == "correlation":
+        outer = np.asarray(grid["c0_min"], float)
+        inner_name, inner = "r2_min", np.asarray(grid["r2_min"], float)
+    else:
+        outer = np.array([np.nan])
+        inner_name = "tau_v" if method == "segmentation" else "std_min"
+        inner = np.asarray(grid[inner_name], float)
+    P = np.zeros((len(outer), len(inner)))
+    R = np.zeros_like(P)
+    J = np.zeros_like(P)
+    Fs = {b: np.zeros_like(P) for b in betas}
+    for s, t in zip(stats, masks, strict=True):
+        for i, c in enumerate(outer):
+            score = _scores_for(s, method, n, None if np.isnan(c) else c)
+            tp, fp, npos = _counts_for_thresholds(score, t, inner)
+            p, r, j = _prf(tp, fp, npos)
+            P[i] += p
+            R[i] += r
+            J[i] += j
+            for b in betas:
+                Fs[b][i] += _f_beta_vec(p, r, b)
+    k = len(stats)
+    res = TuningResult(method, n)
+    for b in betas:
+        i, j = np.unravel_index(np.argmax(Fs[b]), Fs[b].shape)
+        params = {inner_name: float(inner[j])}
+        if method == "correlation":
+            params["c0_min"] = float(outer[i])
+        res.rows[b] = TuningRow(
+            method, b, params, P[i, j] / k, R[i, j] / k, Fs[b][i, j] / k, J[i, j] / k
+        )
+    return res
+
+
+def tuning_table(results: Sequence[TuningResult]) -> str:
+    """Markdown table: method, beta, thresholds, recall, precision, F_beta, IoU."""
+    lines = [
+        "| method | n | beta | thresholds | recall | precision | F_beta | IoU |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for res in results:
+        for b, row in res.rows.items():
+            th = ", ".join(f"{k}={v:g}" for k, v in row.params.items())
+            lines.append(
+                f"| {res.method} | {res.n} | {b:g} | {th} | {row.recall:.3f} | "
+                f"{row.precision:.3f} | {row.f_beta:.3f} | {row.iou:.3f} |"
+            )
+    return "\n".join(lines) + "\n"
