@@ -74,11 +74,17 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
         floor = h.radius + 0.004 + 2.6 * h.radius * rank
         if want_both:
             pa = attach_point(cfg, a)
-            ok = [c for c in free if 0.12 < np.linalg.norm(attach_point(cfg, c) - pa)
-                  < 0.8 * lengths[i]]
+            ok = [
+                c
+                for c in free
+                if 0.12 < np.linalg.norm(attach_point(cfg, c) - pa) < 0.8 * lengths[i]
+            ]
             # a hose attached at both ends must hang clear of the table
-            ok = [c for c in ok if _lowest_point(pa, attach_point(cfg, c), lengths[i], bulge)
-                  > floor + 0.02]
+            ok = [
+                c
+                for c in ok
+                if _lowest_point(pa, attach_point(cfg, c), lengths[i], bulge) > floor + 0.02
+            ]
             # leave enough connectors for the hoses still to come
             if ok and len(free) - 1 >= h.count - i - 1:
                 b = ok[int(rng.integers(0, len(ok)))]
@@ -122,8 +128,9 @@ def _arc_length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
 
 
-def _hanging_curve(pa: np.ndarray, pb: np.ndarray, length: float, bulge: float,
-                   n: int = 400) -> np.ndarray:
+def _hanging_curve(
+    pa: np.ndarray, pb: np.ndarray, length: float, bulge: float, n: int = 400
+) -> np.ndarray:
     """A parabola from ``pa`` to ``pb``, bulging out by ``bulge``, as a chain of ``n`` points
     equally spaced along it whose total length is ``length``."""
     t = np.linspace(0, 1, 400)
@@ -149,11 +156,13 @@ def start_shape(cfg: SceneConfig, spec: HoseSpec) -> np.ndarray:
     """(n_vertices, 3) start positions with (nearly) the hose's arc length between vertices."""
     pa = attach_point(cfg, spec.ends[0])
     if spec.both_ends:
-        return _hanging_curve(pa, attach_point(cfg, spec.ends[1]), spec.length, spec.bulge,
-                              spec.n_vertices)
+        return _hanging_curve(
+            pa, attach_point(cfg, spec.ends[1]), spec.length, spec.bulge, spec.n_vertices
+        )
     s = np.linspace(0, 1.5 * spec.length, 900)
-    pts = np.stack([pa[0] - spec.bulge * np.minimum(1, s / 0.05), np.full_like(s, pa[1]),
-                    pa[2] - s], 1)
+    pts = np.stack(
+        [pa[0] - spec.bulge * np.minimum(1, s / 0.05), np.full_like(s, pa[1]), pa[2] - s], 1
+    )
     # what would go through the table is laid on it, running towards the robot (-x)
     below = pts[:, 2] < spec.floor
     if below.any():

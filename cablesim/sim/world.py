@@ -139,6 +139,8 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     <material name="table" texture="table_tex" texrepeat="6 6" specular="0.05"/>
     <material name="brass" rgba="0.80 0.66 0.30 1" specular="0.5" shininess="0.6"/>
     <material name="floor" rgba="0.25 0.25 0.27 1"/>
+    <texture name="room" type="skybox" builtin="gradient" rgb1="0.62 0.63 0.66" rgb2="0.32 0.33 0.36"
+             width="64" height="64"/>
     {tex}
     {board_mat}
   </asset>
@@ -247,7 +249,9 @@ class World:
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         if self.panda is not None:
-            self.panda.set_home(m, d)
+            from cablesim.sim.panda import set_home
+
+            set_home(m, d, self.panda)
         mujoco.mj_kinematics(m, d)
         for hose in self.hoses:
             target = start_shape(self.cfg, hose.spec)

@@ -30,8 +30,12 @@ def _cfg(**kw) -> SceneConfig:
         (SceneConfig(hoses=HoseConfig(count=9)), "hoses.count"),
         (SceneConfig(hoses=HoseConfig(count=0)), "hoses.count"),
         (SceneConfig(board=BoardConfig(background="marble")), "board.background"),
-        (SceneConfig(hoses=HoseConfig(count=3), board=BoardConfig(connectors=((0, 0.8), (0.1, 0.8)))),
-         "hoses.count"),
+        (
+            SceneConfig(
+                hoses=HoseConfig(count=3), board=BoardConfig(connectors=((0, 0.8), (0.1, 0.8)))
+            ),
+            "hoses.count",
+        ),
         (SceneConfig(board=BoardConfig(connectors=((2.0, 0.5),))), "board.connectors[0]"),
         (SceneConfig(camera=CameraConfig(width=1920, height=1080)), "camera.width/height"),
         (SceneConfig(physics=PhysicsConfig(timestep=0.05)), "physics.timestep"),
