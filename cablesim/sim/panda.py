@@ -70,22 +70,46 @@ _LINKS: tuple[tuple[str, tuple, tuple], ...] = (
     ("link7", (0.088, 0, 0), (1, 1, 0, 0)),
 )
 _INERTIALS: dict[str, tuple[float, tuple, tuple]] = {
-    "link0": (0.629769, (-0.041018, -0.00014, 0.049974),
-              (0.00315, 0.00388, 0.004285, 8.2904e-7, 0.00015, 8.2299e-6)),
-    "link1": (4.970684, (0.003875, 0.002081, -0.04762),
-              (0.70337, 0.70661, 0.009117, -0.000139, 0.006772, 0.019169)),
-    "link2": (0.646926, (-0.003141, -0.02872, 0.003495),
-              (0.007962, 2.811e-2, 2.5995e-2, -3.925e-3, 1.0254e-2, 7.04e-4)),
-    "link3": (3.228604, (2.7518e-2, 3.9252e-2, -6.6502e-2),
-              (3.7242e-2, 3.6155e-2, 1.083e-2, -4.761e-3, -1.1396e-2, -1.2805e-2)),
-    "link4": (3.587895, (-5.317e-2, 1.04419e-1, 2.7454e-2),
-              (2.5853e-2, 1.9552e-2, 2.8323e-2, 7.796e-3, -1.332e-3, 8.641e-3)),
-    "link5": (1.225946, (-1.1953e-2, 4.1065e-2, -3.8437e-2),
-              (3.5549e-2, 2.9474e-2, 8.627e-3, -2.117e-3, -4.037e-3, 2.29e-4)),
-    "link6": (1.666555, (6.0149e-2, -1.4117e-2, -1.0517e-2),
-              (1.964e-3, 4.354e-3, 5.433e-3, 1.09e-4, -1.158e-3, 3.41e-4)),
-    "link7": (7.35522e-1, (1.0517e-2, -4.252e-3, 6.1597e-2),
-              (1.2516e-2, 1.0027e-2, 4.815e-3, -4.28e-4, -1.196e-3, -7.41e-4)),
+    "link0": (
+        0.629769,
+        (-0.041018, -0.00014, 0.049974),
+        (0.00315, 0.00388, 0.004285, 8.2904e-7, 0.00015, 8.2299e-6),
+    ),
+    "link1": (
+        4.970684,
+        (0.003875, 0.002081, -0.04762),
+        (0.70337, 0.70661, 0.009117, -0.000139, 0.006772, 0.019169),
+    ),
+    "link2": (
+        0.646926,
+        (-0.003141, -0.02872, 0.003495),
+        (0.007962, 2.811e-2, 2.5995e-2, -3.925e-3, 1.0254e-2, 7.04e-4),
+    ),
+    "link3": (
+        3.228604,
+        (2.7518e-2, 3.9252e-2, -6.6502e-2),
+        (3.7242e-2, 3.6155e-2, 1.083e-2, -4.761e-3, -1.1396e-2, -1.2805e-2),
+    ),
+    "link4": (
+        3.587895,
+        (-5.317e-2, 1.04419e-1, 2.7454e-2),
+        (2.5853e-2, 1.9552e-2, 2.8323e-2, 7.796e-3, -1.332e-3, 8.641e-3),
+    ),
+    "link5": (
+        1.225946,
+        (-1.1953e-2, 4.1065e-2, -3.8437e-2),
+        (3.5549e-2, 2.9474e-2, 8.627e-3, -2.117e-3, -4.037e-3, 2.29e-4),
+    ),
+    "link6": (
+        1.666555,
+        (6.0149e-2, -1.4117e-2, -1.0517e-2),
+        (1.964e-3, 4.354e-3, 5.433e-3, 1.09e-4, -1.158e-3, 3.41e-4),
+    ),
+    "link7": (
+        7.35522e-1,
+        (1.0517e-2, -4.252e-3, 6.1597e-2),
+        (1.2516e-2, 1.0027e-2, 4.815e-3, -4.28e-4, -1.196e-3, -7.41e-4),
+    ),
 }
 
 # Collision + visual primitives per link, in the link frame: (kind, fromto or pos, size, rgba).
@@ -166,8 +190,17 @@ class PandaNames:
         )
 
 
-def _add_shape(body: mujoco.MjsBody, name: str, kind: str, where: tuple, size: tuple,
-               rgba: tuple, friction: tuple = (1.0, 0.005, 0.0001), condim: int = 3) -> None:
+def _add_shape(
+    body: mujoco.MjsBody,
+    name: str,
+    kind: str,
+    where: tuple,
+    size: tuple,
+    rgba: tuple,
+    friction: tuple = (1.0, 0.005, 0.0001),
+    condim: int = 3,
+    stiff: bool = False,
+) -> None:
     g = body.add_geom(name=name)
     if kind in ("cap", "cyl"):
         g.type = mujoco.mjtGeom.mjGEOM_CAPSULE if kind == "cap" else mujoco.mjtGeom.mjGEOM_CYLINDER
@@ -184,6 +217,10 @@ def _add_shape(body: mujoco.MjsBody, name: str, kind: str, where: tuple, size: t
     g.friction = list(friction)
     g.condim = condim
     g.mass = 0.0  # inertia comes from the explicit inertials
+    if stiff:  # fingers: their contact parameters win over the hose's, and are hard
+        g.priority = 1
+        g.solref = [0.004, 1.0]
+        g.solimp = [0.95, 0.99, 0.001, 0.5, 2.0]
 
 
 def _set_inertial(body: mujoco.MjsBody, link: str) -> None:
@@ -195,8 +232,9 @@ def _set_inertial(body: mujoco.MjsBody, link: str) -> None:
 
 
 def _add_hand(link7: mujoco.MjsBody, p: str) -> None:
-    hand = link7.add_body(name=f"{p}hand", pos=[0, 0, HAND_OFFSET],
-                          quat=[0.9238795, 0, 0, -0.3826834])
+    hand = link7.add_body(
+        name=f"{p}hand", pos=[0, 0, HAND_OFFSET], quat=[0.9238795, 0, 0, -0.3826834]
+    )
     hand.mass = 0.73
     hand.ipos = [-0.01, 0, 0.03]
     hand.inertia = [0.001, 0.0025, 0.0017]
@@ -204,11 +242,17 @@ def _add_hand(link7: mujoco.MjsBody, p: str) -> None:
     hand.gravcomp = 1.0
     _add_shape(hand, f"{p}hand_box", "box", (0, 0, 0.03), (0.03, 0.072, 0.028), OFF_WHITE)
     for side, y in (("l", 0.072), ("r", -0.072)):
-        _add_shape(hand, f"{p}hand_end_{side}", "cyl", (-0.03, y, 0.03, 0.03, y, 0.03),
-                   (0.028,), OFF_WHITE)
+        _add_shape(
+            hand, f"{p}hand_end_{side}", "cyl", (-0.03, y, 0.03, 0.03, y, 0.03), (0.028,), OFF_WHITE
+        )
     _add_shape(hand, f"{p}hand_rail", "box", (0, 0, 0.0545), (0.012, 0.06, 0.004), DARK)
-    hand.add_site(name=f"{p}grasp_site", pos=[0, 0, TCP_OFFSET], size=[0.005, 0, 0],
-                  rgba=[1, 0, 0, 0], group=4)
+    hand.add_site(
+        name=f"{p}grasp_site",
+        pos=[0, 0, TCP_OFFSET],
+        size=[0.005, 0, 0],
+        rgba=[1, 0, 0, 0],
+        group=4,
+    )
     for side, quat in (("left", (1, 0, 0, 0)), ("right", (0, 0, 0, 1))):
         finger = hand.add_body(name=f"{p}{side}_finger", pos=[0, 0, 0.0584], quat=list(quat))
         finger.mass = 0.015
@@ -223,10 +267,26 @@ def _add_hand(link7: mujoco.MjsBody, p: str) -> None:
         j.armature = 0.05
         j.damping = [2.0, 0.0, 0.0]
         # Finger body behind the pad (y from 7 mm to 19 mm), then the high-friction pad.
-        _add_shape(finger, f"{p}{side}_finger_body", "box", (0, 0.013, 0.026),
-                   (0.0105, 0.006, 0.026), OFF_WHITE)
-        _add_shape(finger, f"{p}{side}_finger_pad", "box", (0, 0.0035, 0.0393),
-                   (0.01, 0.0035, 0.0152), PAD, friction=(1.5, 0.01, 0.0002), condim=4)
+        _add_shape(
+            finger,
+            f"{p}{side}_finger_body",
+            "box",
+            (0, 0.013, 0.026),
+            (0.0105, 0.006, 0.026),
+            OFF_WHITE,
+            stiff=True,
+        )
+        _add_shape(
+            finger,
+            f"{p}{side}_finger_pad",
+            "box",
+            (0, 0.0035, 0.0393),
+            (0.01, 0.0035, 0.0152),
+            PAD,
+            friction=(1.5, 0.01, 0.0002),
+            condim=4,
+            stiff=True,
+        )
 
 
 def panda_spec(prefix: str = "", home_key: bool = True) -> mujoco.MjSpec:
@@ -281,8 +341,12 @@ def _add_actuators(spec: mujoco.MjSpec, p: str) -> None:
     tendon = spec.add_tendon(name=f"{p}finger_split")
     tendon.wrap_joint(p + FINGER_JOINTS[0], 1.0)
     tendon.wrap_joint(p + FINGER_JOINTS[1], 1.0)
-    eq = spec.add_equality(name=f"{p}finger_sync", type=mujoco.mjtEq.mjEQ_JOINT,
-                           name1=p + FINGER_JOINTS[0], name2=p + FINGER_JOINTS[1])
+    eq = spec.add_equality(
+        name=f"{p}finger_sync",
+        type=mujoco.mjtEq.mjEQ_JOINT,
+        name1=p + FINGER_JOINTS[0],
+        name2=p + FINGER_JOINTS[1],
+    )
     eq.solref = [0.005, 1.0]
     eq.solimp = [0.95, 0.99, 0.001, 0.5, 2.0]
     g = spec.add_actuator(name=f"{p}gripper", target=f"{p}finger_split")
@@ -297,15 +361,23 @@ def _add_actuators(spec: mujoco.MjSpec, p: str) -> None:
     g.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
     # Equality used by the explicit ``grasp_mode="equality"`` fallback; its second body and
     # anchors are set at grasp time.  Inactive by default.
-    c = spec.add_equality(name=f"{p}grasp_connect", type=mujoco.mjtEq.mjEQ_CONNECT,
-                          objtype=mujoco.mjtObj.mjOBJ_BODY, name1=f"{p}hand", name2="world")
+    c = spec.add_equality(
+        name=f"{p}grasp_connect",
+        type=mujoco.mjtEq.mjEQ_CONNECT,
+        objtype=mujoco.mjtObj.mjOBJ_BODY,
+        name1=f"{p}hand",
+        name2="world",
+    )
     c.active = False
     c.solref = [0.02, 1.0]
 
 
-def attach_panda(scene: mujoco.MjSpec, pos: Sequence[float] = (0.0, 0.0, 0.0),
-                 quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
-                 prefix: str = "panda/") -> PandaNames:
+def attach_panda(
+    scene: mujoco.MjSpec,
+    pos: Sequence[float] = (0.0, 0.0, 0.0),
+    quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+    prefix: str = "panda/",
+) -> PandaNames:
     """Attach a Panda to ``scene``'s world body at ``pos``/``quat`` (wxyz); names get ``prefix``."""
     arm = panda_spec(home_key=False)
     frame = scene.worldbody.add_frame(pos=list(pos), quat=list(quat))

@@ -1,0 +1,72 @@
+"""Grasp and release sequences built from the :class:`Robot` primitives.
+
+``approach_and_grasp``: joint-space move to a pre-grasp pose ``pregrasp_distance`` behind the
+grasp along the hand's approach axis (via ``RETRACT_QPOS`` if the direct joint path collides),
+open, straight line in, close.  ``release_and_retreat``: open, straight line out, retract.
+"""
+
+from __future__ import annotations
+
+from cablesim.robot.base import MoveResult, Robot
+from cablesim.robot.pose import Pose
+from cablesim.sim.panda import MAX_OPENING
+
+
+def _retract_qpos():
+    from cablesim.robot.sim_panda import RETRACT_QPOS as q
+
+    return q
+
+
+def pregrasp_pose(grasp: Pose, distance: float) -> Pose:
+    """``grasp`` moved back by ``distance`` along its approach (hand z) axis."""
+    return grasp.translated(-distance * grasp.rotation[:, 2])
+
+
+def move_joints_safely(robot: Robot, q, speed_factor: float = 0.3) -> MoveResult:
+    """Joint move; if the direct path is blocked, go through the retract configuration."""
+    res = robot.move_joints(q, speed_factor)
+    if res or not res.reason.startswith("collision"):
+        return res
+    via = robot.move_joints(_retract_qpos(), speed_factor)
+    if not via:
+        return MoveResult(False, f"direct path blocked ({res.reason}); via retract: {via.reason}")
+    return robot.move_joints(q, speed_factor)
+
+
+def approach_and_grasp(
+    robot: Robot,
+    grasp: Pose,
+    pregrasp_distance: float = 0.08,
+    width: float = 0.015,
+    force: float = 70.0,
+    speed: float = 0.05,
+) -> tuple[MoveResult, bool]:
+    """Move to ``grasp`` from behind and close the gripper; returns (motion result, held)."""
+    pre = pregrasp_pose(grasp, pregrasp_distance)
+    for pose, what in ((grasp, "grasp"), (pre, "pre-grasp")):
+        ok, reason = robot.check_reachable(pose)
+        if not ok:
+            return MoveResult(False, f"{what} pose unreachable: {reason}"), False
+    q_pre = robot.solve_ik(pre)
+    if q_pre is None:
+        return MoveResult(False, "pre-grasp pose unreachable"), False
+    if robot.gripper_opening < MAX_OPENING - 0.005:
+        robot.open()
+    res = move_joints_safely(robot, q_pre)
+    if not res:
+        return res, False
+    res = robot.move_to(grasp, speed=speed)
+    if not res:
+        return res, False
+    return res, robot.grasp(width=width, force=force)
+
+
+def release_and_retreat(robot: Robot, distance: float = 0.08, speed: float = 0.1) -> MoveResult:
+    """Open, back off along the approach axis, then go to the retract configuration."""
+    robot.open()
+    pose = robot.ee_pose()
+    res = robot.move_to(pregrasp_pose(pose, distance), speed=speed)
+    if not res:
+        return res
+    return move_joints_safely(robot, _retract_qpos())

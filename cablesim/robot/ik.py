@@ -1,0 +1,255 @@
+"""Inverse kinematics and collision checks on an arm-only model (mink differential IK).
+
+The full scene (hoses with hundreds of dofs) is ~100x slower per IK iteration, so IK runs on a
+small model: the Panda at the scene's base pose plus the static obstacles (table, board,
+connectors) copied in as primitive geoms.  Checking a configuration never touches the scene.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mink
+import mujoco
+import numpy as np
+
+from cablesim.robot.pose import Pose
+from cablesim.sim.panda import (
+    JOINT_LIMITS,
+    PandaNames,
+    attach_panda,
+    joint_qpos_addresses,
+    robot_body_ids,
+)
+
+_PRIMITIVES = (
+    mujoco.mjtGeom.mjGEOM_PLANE,
+    mujoco.mjtGeom.mjGEOM_SPHERE,
+    mujoco.mjtGeom.mjGEOM_CAPSULE,
+    mujoco.mjtGeom.mjGEOM_ELLIPSOID,
+    mujoco.mjtGeom.mjGEOM_CYLINDER,
+    mujoco.mjtGeom.mjGEOM_BOX,
+)
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A static primitive geom in world coordinates (MuJoCo type, size, pos, quat wxyz)."""
+
+    name: str
+    geom_type: int
+    size: tuple[float, float, float]
+    pos: tuple[float, float, float]
+    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+
+    @staticmethod
+    def box(
+        name: str,
+        pos: Sequence[float],
+        half_size: Sequence[float],
+        quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+    ) -> Obstacle:
+        return Obstacle(
+            name, int(mujoco.mjtGeom.mjGEOM_BOX), tuple(half_size), tuple(pos), tuple(quat)
+        )
+
+
+def static_obstacles(
+    model: mujoco.MjModel, data: mujoco.MjData, exclude_bodies: Sequence[int] = ()
+) -> list[Obstacle]:
+    """Primitive geoms fixed to the world that can collide (table, board, connectors).
+
+    Planes become thin boxes.  ``data`` must have current kinematics (after mj_forward).
+    """
+    excluded = set(int(b) for b in exclude_bodies)
+    out: list[Obstacle] = []
+    for g in range(model.ngeom):
+        body = int(model.geom_bodyid[g])
+        if body in excluded or model.body_weldid[body] != 0:
+            continue
+        if model.geom_contype[g] == 0 and model.geom_conaffinity[g] == 0:
+            continue
+        gtype = int(model.geom_type[g])
+        if gtype not in _PRIMITIVES:
+            continue
+        size = tuple(float(s) for s in model.geom_size[g])
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, data.geom_xmat[g])
+        pos = data.geom_xpos[g].copy()
+        if gtype == mujoco.mjtGeom.mjGEOM_PLANE:
+            half = 0.01
+            sx = size[0] if size[0] > 0 else 5.0
+            sy = size[1] if size[1] > 0 else 5.0
+            normal = data.geom_xmat[g].reshape(3, 3)[:, 2]
+            pos = pos - half * normal
+            gtype, size = int(mujoco.mjtGeom.mjGEOM_BOX), (sx, sy, half)
+        name = model.geom(g).name or f"geom{g}"
+        out.append(Obstacle(name, gtype, size, tuple(pos), tuple(quat)))
+    return out
+
+
+@dataclass(frozen=True)
+class IKResult:
+    q: np.ndarray  # (7,) arm joints
+    converged: bool
+    position_error: float
+    rotation_error: float
+    iterations: int
+
+
+class ArmModel:
+    """The arm alone (at the scene's base pose) with static obstacles, for IK and checks."""
+
+    def __init__(
+        self,
+        base_pos: Sequence[float] = (0.0, 0.0, 0.0),
+        base_quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
+        obstacles: Sequence[Obstacle] = (),
+        position_tolerance: float = 5e-4,
+        rotation_tolerance: float = 5e-3,
+        max_iterations: int = 60,
+    ):
+        spec = mujoco.MjSpec()
+        self.names: PandaNames = attach_panda(spec, base_pos, base_quat, prefix="")
+        for ob in obstacles:
+            g = spec.worldbody.add_geom(
+                name=f"obstacle/{ob.name}",
+                type=ob.geom_type,
+                size=list(ob.size),
+                pos=list(ob.pos),
+                quat=list(ob.quat),
+            )
+            g.contype, g.conaffinity, g.group = 1, 1, 3
+        self.obstacle_names = tuple(ob.name for ob in obstacles)
+        self.model = spec.compile()
+        self.data = mujoco.MjData(self.model)
+        self.position_tolerance = position_tolerance
+        self.rotation_tolerance = rotation_tolerance
+        self.max_iterations = max_iterations
+
+        m = self.model
+        self._arm_qadr = joint_qpos_addresses(m, self.names.joints)
+        self._finger_qadr = joint_qpos_addresses(m, self.names.finger_joints)
+        robot = robot_body_ids(m, prefix="")
+        self._robot_geoms = np.isin(m.geom_bodyid, robot)
+        # Self-collision between robot links at least 3 apart in the chain (neighbours overlap
+        # where primitives meet at the joints; the real arm's limits keep them apart anyway).
+        chain = {m.body(n).id: i for i, n in enumerate(self.names.bodies)}
+        for f in self.names.finger_bodies:
+            chain[m.body(f).id] = len(self.names.bodies) - 2
+        self._chain = chain
+        self._base_body = m.body(self.names.base_body).id
+        # Robot-robot pairs generate contacts here (the broadphase filters on body masks too).
+        m.geom_conaffinity[self._robot_geoms] = 3
+        m.body_conaffinity[robot] |= 2
+
+        self.configuration = mink.Configuration(m)
+        self.frame_task = mink.FrameTask(
+            self.names.site, "site", position_cost=1.0, orientation_cost=0.5, lm_damping=1e-4
+        )
+        self.posture_task = mink.PostureTask(m, cost=1e-3)
+        self.limits = [mink.ConfigurationLimit(m, gain=0.5)]
+
+    # ---- kinematics --------------------------------------------------------------------------
+    def set_q(self, q: np.ndarray, opening: float | None = None) -> None:
+        self.data.qpos[self._arm_qadr] = q
+        if opening is not None:
+            self.data.qpos[self._finger_qadr] = opening / 2.0
+        mujoco.mj_kinematics(self.model, self.data)
+
+    def fk(self, q: np.ndarray) -> Pose:
+        """TCP pose for arm joints ``q``."""
+        self.set_q(q)
+        sid = self.model.site(self.names.site).id
+        return Pose.from_rotation(self.data.site_xpos[sid], self.data.site_xmat[sid].reshape(3, 3))
+
+    def solve(
+        self,
+        target: Pose,
+        q_init: np.ndarray,
+        q_posture: np.ndarray | None = None,
+        opening: float = 0.08,
+    ) -> IKResult:
+        """Differential IK from ``q_init`` to ``target``; joint limits are respected."""
+        qpos = self.data.qpos.copy()
+        qpos[self._arm_qadr] = q_init
+        qpos[self._finger_qadr] = opening / 2.0
+        self.configuration.update(qpos)
+        posture = qpos.copy()
+        if q_posture is not None:
+            posture[self._arm_qadr] = q_posture
+        self.posture_task.set_target(posture)
+        self.frame_task.set_target(
+            mink.SE3.from_rotation_and_translation(
+                mink.SO3(np.asarray(target.quaternion)), np.asarray(target.position)
+            )
+        )
+        pos_err = rot_err = np.inf
+        it = 0
+        for it in range(1, self.max_iterations + 1):
+            err = self.frame_task.compute_error(self.configuration)
+            pos_err, rot_err = float(np.linalg.norm(err[:3])), float(np.linalg.norm(err[3:]))
+            if pos_err < self.position_tolerance and rot_err < self.rotation_tolerance:
+                it -= 1
+                break
+            vel = mink.solve_ik(
+                self.configuration,
+                [self.frame_task, self.posture_task],
+                dt=1.0,
+                solver="daqp",
+                damping=1e-6,
+                limits=self.limits,
+            )
+            self.configuration.integrate_inplace(vel, 1.0)
+        else:
+            err = self.frame_task.compute_error(self.configuration)
+            pos_err, rot_err = float(np.linalg.norm(err[:3])), float(np.linalg.norm(err[3:]))
+        q = self.configuration.q[self._arm_qadr].copy()
+        converged = pos_err < self.position_tolerance and rot_err < self.rotation_tolerance
+        return IKResult(q, converged, pos_err, rot_err, it)
+
+    # ---- checks ------------------------------------------------------------------------------
+    def limit_violation(self, q: np.ndarray, margin: float = 1e-4) -> str:
+        """Empty if ``q`` is within the joint limits, else which joint is out."""
+        for i, (lo, hi) in enumerate(JOINT_LIMITS):
+            if not (lo - margin <= q[i] <= hi + margin):
+                return f"joint{i + 1} = {q[i]:.3f} outside [{lo:.3f}, {hi:.3f}]"
+        return ""
+
+    def collisions(
+        self, q: np.ndarray, opening: float = 0.08, min_distance: float = 0.0
+    ) -> list[tuple[str, str, float]]:
+        """Robot-obstacle and robot self-collision pairs (names, distance) at ``q``."""
+        m, d = self.model, self.data
+        self.set_q(q, opening)
+        mujoco.mj_collision(m, d)
+        out = []
+        for c in d.contact[: d.ncon]:
+            g1, g2 = int(c.geom[0]), int(c.geom[1])
+            if g1 < 0 or g2 < 0 or c.dist >= min_distance:
+                continue
+            r1, r2 = self._robot_geoms[g1], self._robot_geoms[g2]
+            if r1 and r2:
+                b1, b2 = self._chain.get(m.geom_bodyid[g1]), self._chain.get(m.geom_bodyid[g2])
+                if b1 is None or b2 is None or abs(b1 - b2) < 3:
+                    continue
+            elif r1 or r2:
+                robot_geom = g1 if r1 else g2
+                if m.geom_bodyid[robot_geom] == self._base_body:
+                    continue  # the base stands on the table
+            else:
+                continue
+            out.append((m.geom(g1).name, m.geom(g2).name, float(c.dist)))
+        return out
+
+    def check(self, q: np.ndarray, opening: float = 0.08) -> str:
+        """Empty string if ``q`` is within limits and collision-free, else the reason."""
+        reason = self.limit_violation(q)
+        if reason:
+            return f"joint limit: {reason}"
+        hits = self.collisions(q, opening)
+        if hits:
+            a, b, dist = hits[0]
+            return f"collision: {a} with {b} (penetration {-dist * 1000:.1f} mm)"
+        return ""

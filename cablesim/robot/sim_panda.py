@@ -1,0 +1,380 @@
+"""The simulated Panda: IK on an arm-only model, joint position control in the scene.
+
+A Cartesian move is planned first (IK along the straight line, every waypoint checked for joint
+limits and collisions on the arm-only model with the static obstacles) and executed only if the
+plan is valid; execution streams interpolated joint targets to the position actuators with a
+minimum-jerk time law, watches the scene's contacts between robot and static geoms, and then
+waits for the TCP to settle.  Nothing here raises for an unreachable target or a collision.
+
+Grasping: ``grasp_mode="friction"`` (default) closes the real finger joints on the hose and
+relies on pad friction.  ``grasp_mode="equality"`` is an explicitly chosen fallback that also
+switches on a ``connect`` equality between the hand and the nearest flex vertex body (looser:
+a few mm of lag); it is not the default because it is not how the real robot holds a hose.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import mujoco
+import numpy as np
+
+from cablesim.errors import ConfigError
+from cablesim.robot.base import MoveResult, Robot
+from cablesim.robot.ik import ArmModel, IKResult, Obstacle, static_obstacles
+from cablesim.robot.pose import Pose
+from cablesim.sim.panda import (
+    HOME_QPOS,
+    JOINT_LIMITS,
+    MAX_OPENING,
+    PandaNames,
+    joint_qpos_addresses,
+    robot_body_ids,
+    set_grasp_force,
+)
+
+#: A configuration with the hand pointing along +x (towards the board), elbow up.
+#: Planar, so joint6 = pi/2 + joint2 - joint4; TCP at about (0.49, 0, 0.76) from the base.
+FORWARD_QPOS = np.array([0.0, -0.6, 0.0, -2.3, 0.0, np.pi / 2 + 1.7, np.pi / 4])
+#: The same arm pose with the hand pointing down (TCP about (0.37, 0, 0.46)): a collision-free
+#: way point between HOME_QPOS (TCP 5 cm from a board at x = 0.6) and poses facing the board.
+RETRACT_QPOS = np.array([0.0, -0.6, 0.0, -2.3, 0.0, 1.7, np.pi / 4])
+#: Velocity feed-forward through the position target: kv / kp of the joint actuators.
+_KV_OVER_KP = 0.1
+#: Franka's nominal joint velocity limits (rad/s).
+JOINT_VELOCITY_LIMITS = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
+
+
+class SimWorld(Protocol):
+    """What :class:`SimPanda` needs from the simulated world."""
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    T_world_camera: np.ndarray
+    panda: PandaNames
+    panda_base: tuple[Sequence[float], Sequence[float]]
+
+    def step(self, n: int = 1) -> None: ...
+
+
+@dataclass
+class SimPandaConfig:
+    """Tolerances and limits of the simulated controller."""
+
+    position_tolerance: float = 0.002  # m, TCP to target after settling
+    rotation_tolerance: float = 0.02  # rad
+    waypoint_spacing: float = 0.005  # m between IK waypoints on a line
+    waypoint_angle: float = 0.05  # rad between IK waypoints
+    max_joint_jump: float = 0.25  # rad between consecutive waypoints (else: IK branch switch)
+    settle_time: float = 0.6  # s allowed after the trajectory to reach tolerance
+    collision_depth: float = 0.002  # m of robot/static penetration that aborts a motion
+    grasp_timeout: float = 1.5  # s
+    grasp_vertex_distance: float = 0.03  # m, equality mode: max TCP to vertex distance
+    grasp_mode: Literal["friction", "equality"] = "friction"
+
+    def __post_init__(self) -> None:
+        if self.grasp_mode not in ("friction", "equality"):
+            raise ConfigError(
+                "grasp_mode", f"must be 'friction' or 'equality', got {self.grasp_mode!r}"
+            )
+        for name in ("position_tolerance", "waypoint_spacing", "settle_time", "grasp_timeout"):
+            if getattr(self, name) <= 0:
+                raise ConfigError(name, "must be > 0")
+
+
+def _interpolate(plan: np.ndarray, s: float, duration: float) -> tuple[np.ndarray, np.ndarray]:
+    """Joint target and velocity at normalised time ``s`` along piecewise-linear ``plan``."""
+    n_seg = len(plan) - 1
+    u = min_jerk(s) * n_seg
+    i = min(int(u), n_seg - 1)
+    seg = plan[i + 1] - plan[i]
+    du_dt = _min_jerk_rate(s) * n_seg / duration
+    return plan[i] + (u - i) * seg, seg * du_dt
+
+
+def _min_jerk_rate(s: float) -> float:
+    s = min(max(s, 0.0), 1.0)
+    return 30.0 * s * s * (1.0 - s) * (1.0 - s)
+
+
+def min_jerk(s: float) -> float:
+    """Minimum-jerk time law on [0, 1]; peak rate 1.875."""
+    s = min(max(s, 0.0), 1.0)
+    return s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
+
+
+class SimPanda(Robot):
+    """The :class:`Robot` interface on a Panda attached to a simulated world."""
+
+    def __init__(
+        self,
+        world: SimWorld,
+        config: SimPandaConfig | None = None,
+        obstacles: Sequence[Obstacle] | None = None,
+    ):
+        self.world = world
+        self.config = config or SimPandaConfig()
+        self.names = world.panda
+        m, d = world.model, world.data
+        n = self.names
+        self.T_world_camera = np.asarray(world.T_world_camera, dtype=float)
+        self._qadr = joint_qpos_addresses(m, n.joints)
+        self._dofadr = np.asarray([m.jnt_dofadr[m.joint(j).id] for j in n.joints])
+        self._finger_qadr = joint_qpos_addresses(m, n.finger_joints)
+        self._act = np.asarray([m.actuator(a).id for a in n.actuators])
+        self._gripper = m.actuator(n.gripper_actuator).id
+        self._site = m.site(n.site).id
+        self._hand = m.body(n.hand_body).id
+        self._eq = m.equality(n.grasp_equality).id
+        robot_bodies = robot_body_ids(m, n.prefix)
+        self._robot_geom = np.isin(m.geom_bodyid, robot_bodies)
+        mujoco.mj_forward(m, d)
+        if obstacles is None:
+            obstacles = static_obstacles(m, d, exclude_bodies=robot_bodies)
+        self._static_geom = np.zeros(m.ngeom, dtype=bool)
+        for g in range(m.ngeom):
+            self._static_geom[g] = (not self._robot_geom[g]) and m.body_weldid[
+                m.geom_bodyid[g]
+            ] == 0
+        base_pos, base_quat = world.panda_base
+        self.arm = ArmModel(base_pos, base_quat, obstacles)
+        self._vertex_bodies = np.unique(m.flex_vertbodyid[m.flex_vertbodyid > 0])
+        self.last_plan: list[np.ndarray] = []
+
+    # ---- state -------------------------------------------------------------------------------
+    @property
+    def joint_positions(self) -> np.ndarray:
+        return self.world.data.qpos[self._qadr].copy()
+
+    @property
+    def gripper_opening(self) -> float:
+        return float(np.sum(self.world.data.qpos[self._finger_qadr]))
+
+    def ee_pose(self) -> Pose:
+        d = self.world.data
+        return Pose.from_rotation(d.site_xpos[self._site], d.site_xmat[self._site].reshape(3, 3))
+
+    @property
+    def dt(self) -> float:
+        return float(self.world.model.opt.timestep)
+
+    # ---- planning ----------------------------------------------------------------------------
+    def solve_ik(self, pose: Pose, seeds: Sequence[np.ndarray] | None = None) -> np.ndarray | None:
+        """Arm joints of a collision-free IK solution within limits for ``pose``, or None."""
+        ok, _, result = self._reachable(pose, seeds)
+        return result.q if ok and result is not None else None
+
+    def check_reachable(self, pose: Pose) -> tuple[bool, str]:
+        ok, reason, _ = self._reachable(pose, None)
+        return ok, reason
+
+    def _reachable(
+        self, pose: Pose, seeds: Sequence[np.ndarray] | None
+    ) -> tuple[bool, str, IKResult | None]:
+        if seeds is None:
+            seeds = (self.joint_positions, FORWARD_QPOS, HOME_QPOS)
+        opening = self.gripper_opening
+        reason = "IK did not converge"
+        best: IKResult | None = None
+        for seed in seeds:
+            r = self.arm.solve(
+                pose, np.asarray(seed, dtype=float), np.asarray(seed, dtype=float), opening
+            )
+            if not r.converged:
+                if best is None or r.position_error < best.position_error:
+                    best = r
+                    reason = (
+                        f"IK did not converge (position error {r.position_error * 1000:.1f}"
+                        f" mm, rotation error {math.degrees(r.rotation_error):.1f} deg)"
+                    )
+                continue
+            problem = self.arm.check(r.q, opening)
+            if not problem:
+                return True, "", r
+            reason = problem
+        return False, reason, None
+
+    def plan_line(self, target: Pose) -> tuple[list[np.ndarray], str]:
+        """Joint waypoints along the straight TCP line to ``target``; empty list + reason on failure."""
+        cfg = self.config
+        start = self.ee_pose()
+        dist, angle = start.distance_to(target)
+        n = max(1, math.ceil(dist / cfg.waypoint_spacing), math.ceil(angle / cfg.waypoint_angle))
+        q = self.joint_positions
+        opening = self.gripper_opening
+        plan = [q]
+        for i in range(1, n + 1):
+            s = i / n
+            r = self.arm.solve(start.interpolate(target, s), q, q, opening)
+            where = f"at {100 * s:.0f}% of the line"
+            if not r.converged:
+                return [], (
+                    f"IK did not converge {where} (position error {r.position_error * 1000:.1f} mm)"
+                )
+            if np.max(np.abs(r.q - q)) > cfg.max_joint_jump:
+                return [], f"IK jumped between branches {where} (near a singularity or limit)"
+            problem = self.arm.check(r.q, opening)
+            if problem:
+                return [], f"{problem} {where}"
+            q = r.q
+            plan.append(q)
+        return plan, ""
+
+    # ---- motion ------------------------------------------------------------------------------
+    def move_to(self, pose: Pose, speed: float = 0.1, angular_speed: float = 0.8) -> MoveResult:
+        if speed <= 0 or angular_speed <= 0:
+            return MoveResult(False, "speed must be > 0")
+        plan, reason = self.plan_line(pose)
+        if not plan:
+            return MoveResult(False, reason, self._pos_error(pose))
+        dist, angle = self.ee_pose().distance_to(pose)
+        duration = max(1.875 * dist / speed, 1.875 * angle / angular_speed, 0.02)
+        self.last_plan = plan
+        return self._execute(np.asarray(plan), duration, pose)
+
+    def move_joints(self, q: np.ndarray, speed_factor: float = 0.3) -> MoveResult:
+        q = np.asarray(q, dtype=float).reshape(7)
+        if not 0 < speed_factor <= 1:
+            return MoveResult(False, f"speed_factor must be in (0, 1], got {speed_factor}")
+        problem = self.arm.limit_violation(q)
+        if problem:
+            return MoveResult(False, f"joint limit: {problem}")
+        q0 = self.joint_positions
+        n = max(1, math.ceil(np.max(np.abs(q - q0)) / 0.05))
+        plan = [q0 + (q - q0) * i / n for i in range(n + 1)]
+        for i, qi in enumerate(plan[1:], 1):
+            problem = self.arm.check(qi, self.gripper_opening)
+            if problem:
+                return MoveResult(False, f"{problem} at {100 * i / n:.0f}% of the joint path")
+        duration = max(
+            1.875 * float(np.max(np.abs(q - q0) / (JOINT_VELOCITY_LIMITS * speed_factor))), 0.02
+        )
+        return self._execute(np.asarray(plan), duration, self.arm.fk(q))
+
+    def _execute(self, plan: np.ndarray, duration: float, target: Pose) -> MoveResult:
+        cfg, w = self.config, self.world
+        d = w.data
+        dt = self.dt
+        steps = max(1, math.ceil(duration / dt))
+        t = 0.0
+        for k in range(1, steps + 1):
+            q_des, qd_des = _interpolate(plan, k / steps, duration)
+            d.ctrl[self._act] = q_des + _KV_OVER_KP * qd_des
+            w.step(1)
+            t += dt
+            if k % 5 == 0:
+                hit = self._static_collision()
+                if hit:
+                    d.ctrl[self._act] = self.joint_positions  # stop where we are
+                    return MoveResult(
+                        False, f"collision in scene: {hit}", self._pos_error(target), t
+                    )
+        d.ctrl[self._act] = plan[-1]
+        for _ in range(max(1, math.ceil(cfg.settle_time / dt))):
+            if np.abs(d.qvel[self._dofadr]).max() < 2e-3:
+                break
+            w.step(1)
+            t += dt
+        pos_err, rot_err = self.ee_pose().distance_to(target)
+        if pos_err < cfg.position_tolerance and rot_err < cfg.rotation_tolerance:
+            return MoveResult(True, "", pos_err, t)
+        hit = self._static_collision()
+        return MoveResult(
+            False,
+            f"target not reached within tolerance (error "
+            f"{pos_err * 1000:.1f} mm, {math.degrees(rot_err):.1f} deg)"
+            + (f"; contact: {hit}" if hit else ""),
+            pos_err,
+            t,
+        )
+
+    def _static_collision(self) -> str:
+        """Name pair of a robot/static-geom contact deeper than the configured depth, or ''."""
+        m, d = self.world.model, self.world.data
+        for c in d.contact[: d.ncon]:
+            g1, g2 = int(c.geom[0]), int(c.geom[1])
+            if g1 < 0 or g2 < 0 or c.dist > -self.config.collision_depth:
+                continue
+            r1, r2 = self._robot_geom[g1], self._robot_geom[g2]
+            if (r1 and self._static_geom[g2]) or (r2 and self._static_geom[g1]):
+                return f"{m.geom(g1).name} with {m.geom(g2).name}"
+        return ""
+
+    def _pos_error(self, target: Pose) -> float:
+        return float(np.linalg.norm(self.ee_pose().position - target.position))
+
+    # ---- gripper -----------------------------------------------------------------------------
+    def open(self, width: float = MAX_OPENING, speed: float = 0.1) -> bool:
+        self._set_equality(False)
+        width = float(np.clip(width, 0.0, MAX_OPENING))
+        self._drive_gripper(width, speed)
+        return abs(self.gripper_opening - width) < 0.005
+
+    def grasp(
+        self,
+        width: float = 0.015,
+        force: float = 70.0,
+        speed: float = 0.05,
+        epsilon_inner: float = 0.01,
+        epsilon_outer: float = 0.01,
+    ) -> bool:
+        set_grasp_force(self.world.model, self.names, force)
+        self._drive_gripper(0.0, speed)
+        opening = self.gripper_opening
+        held = width - epsilon_inner <= opening <= width + epsilon_outer and opening > 0.002
+        if held and self.config.grasp_mode == "equality":
+            held = self._attach_nearest_vertex()
+        return bool(held)
+
+    def _drive_gripper(self, target: float, speed: float) -> None:
+        """Ramp the gripper command at ``speed`` (m/s), then wait until the fingers stop."""
+        w, d = self.world, self.world.data
+        dt = self.dt
+        start = float(d.ctrl[self._gripper])
+        ramp = max(1, math.ceil(abs(target - start) / max(speed, 1e-3) / dt))
+        for k in range(1, ramp + 1):
+            d.ctrl[self._gripper] = start + (target - start) * k / ramp
+            w.step(1)
+        still = 0
+        for _ in range(math.ceil(self.config.grasp_timeout / dt)):
+            w.step(1)
+            v = np.abs(
+                d.qvel[
+                    [
+                        self.world.model.jnt_dofadr[self.world.model.joint(j).id]
+                        for j in self.names.finger_joints
+                    ]
+                ]
+            ).max()
+            still = still + 1 if v < 1e-3 else 0
+            if still >= 20:
+                break
+
+    def _set_equality(self, active: bool) -> None:
+        self.world.data.eq_active[self._eq] = int(active)
+
+    def _attach_nearest_vertex(self) -> bool:
+        m, d = self.world.model, self.world.data
+        if len(self._vertex_bodies) == 0:
+            return False
+        tcp = d.site_xpos[self._site]
+        dists = np.linalg.norm(d.xpos[self._vertex_bodies] - tcp, axis=1)
+        j = int(np.argmin(dists))
+        if dists[j] > self.config.grasp_vertex_distance:
+            return False
+        body = int(self._vertex_bodies[j])
+        hand_R = d.xmat[self._hand].reshape(3, 3)
+        anchor_in_hand = hand_R.T @ (d.xpos[body] - d.xpos[self._hand])
+        m.eq_obj2id[self._eq] = body
+        m.eq_data[self._eq, 0:3] = anchor_in_hand
+        m.eq_data[self._eq, 3:6] = 0.0
+        self._set_equality(True)
+        return True
+
+    # ---- limits for callers ------------------------------------------------------------------
+    @staticmethod
+    def joint_limits() -> np.ndarray:
+        return JOINT_LIMITS.copy()
