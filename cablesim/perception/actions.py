@@ -39,7 +39,7 @@ def subsample_by_gripper(frames: Sequence[Frame], delta: float = 0.001) -> list[
     last = np.asarray(frames[0].gripper, np.float64)
     for f in frames[1:]:
         g = np.asarray(f.gripper, np.float64)
-        if np.linalg.norm(g - last) >= delta:
+        if np.linalg.norm(g - last) >= delta - 1e-12:  # tolerate rounding of exact steps
             kept.append(f)
             last = g
     return kept
