@@ -14,6 +14,8 @@ have_lib "libGL.so.1" || need_debs+=(libgl1)
 have_lib "libOSMesa.so" || need_debs+=(libosmesa6)
 [ -e /usr/lib/x86_64-linux-gnu/libEGL_mesa.so.0 ] || [ -e /usr/lib/aarch64-linux-gnu/libEGL_mesa.so.0 ] \
   || need_debs+=(libegl-mesa0 libgl1-mesa-dri)
+# the RealSense driver (real extra, also used by the tests) loads libusb
+have_lib "libusb-1.0.so.0" || need_debs+=(libusb-1.0-0)
 if [ ${#need_debs[@]} -gt 0 ]; then
   echo "[setup] installing headless GL packages: ${need_debs[*]}"
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
