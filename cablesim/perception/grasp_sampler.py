@@ -227,6 +227,7 @@ class GraspSampler:
         p = self.params
         ok_depth = valid_depth(depth)
         result = SamplingResult(None)
+        unreachable: list[tuple[np.ndarray, str]] = []
         top = int(votes.max(initial=0))
         for level in range(top, p.min_votes - 1, -1):
             level_mask = votes >= level
@@ -252,9 +253,18 @@ class GraspSampler:
                         continue
                     c.frontier = g
                     if self.reachability is not None:
+                        same = [
+                            w
+                            for u, w in unreachable
+                            if np.linalg.norm(u - c.centre) < p.blacklist_distance
+                        ]
+                        if same:  # the same segment seen at a higher vote level
+                            c.rejected = f"unreachable: {same[0]} (same segment as before)"
+                            continue
                         ok, why = self.reachability(c.centre, c.axis)
                         if not ok:
                             c.rejected = f"unreachable: {why}"
+                            unreachable.append((c.centre, why))
                             continue
                     result.proposal = GraspProposal(c.centre, c.axis, c.mask, level, g, c)
                     return result

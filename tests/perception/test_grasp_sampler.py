@@ -163,3 +163,20 @@ def test_sampler_bad_input():
     with pytest.raises(InputError, match="area_min"):
         GraspSamplerParams(area_min=10, area_max=5)
     assert s.propose(np.zeros((H, W), np.int16), DEPTH, K).proposal is None
+
+
+def test_unreachable_segment_not_asked_again_at_lower_level():
+    votes = _line((110, 60), (130, 60), 2)  # short 2-vote segment: one piece
+    votes = _line((20, 180), (300, 180), 1, img=votes)
+    asked = []
+
+    def reach(c, a):
+        asked.append(c)
+        return (c[1] > 0, "out of workspace")  # the upper (2-vote) segment is unreachable
+
+    res = GraspSampler(reachability=reach).propose(votes.astype(np.int16), DEPTH, K)
+    assert res.proposal is not None and res.proposal.level == 1
+    assert res.proposal.centre[1] > 0
+    upper = [c for c in asked if c[1] <= 0]
+    assert len(upper) == 1  # asked once, remembered at level 1
+    assert any("same segment" in (c.rejected or "") for c in res.candidates)
