@@ -1,8 +1,8 @@
 """Grasp and release sequences built from the :class:`Robot` primitives.
 
-``approach_and_grasp``: joint-space move to a pre-grasp pose ``pregrasp_distance`` behind the
-grasp along the hand's approach axis (via ``RETRACT_QPOS`` if the direct joint path collides),
-open, straight line in, close.  ``release_and_retreat``: open, straight line out, retract.
+``approach_and_grasp``: open, joint-space move to ``RETRACT_QPOS`` and from there to a pre-grasp
+pose ``pregrasp_distance`` behind the grasp along the hand's approach axis, straight line in,
+close.  ``release_and_retreat``: open, straight line out, retract.
 """
 
 from __future__ import annotations
@@ -53,7 +53,12 @@ def approach_and_grasp(
         return MoveResult(False, "pre-grasp pose unreachable"), False
     if robot.gripper_opening < MAX_OPENING - 0.005:
         robot.open()
-    res = move_joints_safely(robot, q_pre)
+    # Through the retract configuration (hand down, pulled back): a direct joint move from
+    # wherever the arm is may sweep through hoses, which the arm-only checks cannot see.
+    res = move_joints_safely(robot, _retract_qpos())
+    if not res:
+        return MoveResult(False, f"could not retract before the approach: {res.reason}"), False
+    res = robot.move_joints(q_pre)
     if not res:
         return res, False
     res = robot.move_to(grasp, speed=speed)

@@ -111,7 +111,7 @@ class ArmModel:
         max_iterations: int = 60,
     ):
         spec = mujoco.MjSpec()
-        self.names: PandaNames = attach_panda(spec, base_pos, base_quat, prefix="")
+        self.names: PandaNames = attach_panda(spec, base_pos, base_quat, prefix="arm/")
         for ob in obstacles:
             g = spec.worldbody.add_geom(
                 name=f"obstacle/{ob.name}",
@@ -131,7 +131,7 @@ class ArmModel:
         m = self.model
         self._arm_qadr = joint_qpos_addresses(m, self.names.joints)
         self._finger_qadr = joint_qpos_addresses(m, self.names.finger_joints)
-        robot = robot_body_ids(m, prefix="")
+        robot = robot_body_ids(m, prefix="arm/")
         self._robot_geoms = np.isin(m.geom_bodyid, robot)
         # Self-collision between robot links at least 3 apart in the chain (neighbours overlap
         # where primitives meet at the joints; the real arm's limits keep them apart anyway).

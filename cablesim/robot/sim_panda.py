@@ -175,7 +175,7 @@ class SimPanda(Robot):
         self, pose: Pose, seeds: Sequence[np.ndarray] | None
     ) -> tuple[bool, str, IKResult | None]:
         if seeds is None:
-            seeds = (self.joint_positions, FORWARD_QPOS, HOME_QPOS)
+            seeds = self._seeds(pose)
         opening = self.gripper_opening
         reason = "IK did not converge"
         best: IKResult | None = None
@@ -196,6 +196,16 @@ class SimPanda(Robot):
                 return True, "", r
             reason = problem
         return False, reason, None
+
+    def _seeds(self, pose: Pose) -> list[np.ndarray]:
+        """The forward posture turned (joint 1) to the target, the current joints, home turned."""
+        base_pos, base_quat = self.world.panda_base
+        base = Pose(np.asarray(base_pos, dtype=float), np.asarray(base_quat, dtype=float))
+        local = base.inverse() @ pose
+        yaw = float(np.clip(math.atan2(local.position[1], local.position[0]), *JOINT_LIMITS[0]))
+        forward, home = FORWARD_QPOS.copy(), HOME_QPOS.copy()
+        forward[0] = home[0] = yaw
+        return [forward, self.joint_positions, home]
 
     def plan_line(self, target: Pose) -> tuple[list[np.ndarray], str]:
         """Joint waypoints along the straight TCP line to ``target``; empty list + reason on failure."""
