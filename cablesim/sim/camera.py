@@ -1,0 +1,298 @@
+"""The simulated RGB-D camera: offscreen MuJoCo rendering of the world's fixed "rgbd" camera.
+
+    cam = SimCamera(world)                 # one renderer, reused
+    img = cam.capture()                    # CameraImage: rgb uint8, metric z-depth float32
+    snap = cam.snapshot()                  # + labels and what ground-truth flow needs later
+    cam.close()
+
+Depth is the z-depth along the optical axis in metres (what OpenGL's depth buffer holds,
+linearised), 0 where nothing was hit.  Labels come from MuJoCo's segmentation rendering: a
+hose is a flex (one label per hose: its index), a robot pixel is any geom whose body descends
+from the robot root body (``panda/link0``), everything else is background.  RGB and depth
+come from one render pass, labels from a second one.
+
+The optional depth noise (``cfg.camera.depth_noise``) is RealSense-like: Gaussian with
+sigma = k z^2, 1 mm quantisation, and dropped pixels (0) at depth discontinuities; it is
+drawn from ``rng_streams(cfg.seed)["depth_noise"]``, so a camera created for the same seed
+produces the same noise sequence.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
+
+import mujoco
+import numpy as np
+
+from cablesim.camera.base import Camera, CameraImage
+from cablesim.errors import InputError
+from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT, Intrinsics
+from cablesim.sim.layout import rng_streams
+
+if TYPE_CHECKING:
+    from cablesim.sim.world import World
+
+ROBOT_ROOT = "panda/link0"
+DEPTH_EDGE_JUMP = 0.02  # m: a neighbour this much nearer or farther makes a pixel an edge
+DEPTH_EDGE_DROPOUT = 0.5  # probability that a noisy camera returns nothing at an edge
+DEPTH_QUANTUM = 0.001  # m
+
+
+def intrinsics_from_fovy(width: int, height: int, fovy_deg: float) -> Intrinsics:
+    """Pinhole intrinsics of a MuJoCo camera (square pixels, principal point at the centre;
+    pixel (0, 0) is the centre of the top-left pixel)."""
+    if width <= 0 or height <= 0:
+        raise InputError(f"image size must be positive, got {width}x{height}")
+    if not 0 < fovy_deg < 180:
+        raise InputError(f"fovy must be in (0, 180) degrees, got {fovy_deg}")
+    f = 0.5 * height / math.tan(math.radians(fovy_deg) / 2)
+    return Intrinsics(f, f, (width - 1) / 2, (height - 1) / 2, int(width), int(height))
+
+
+def robot_body_ids(model: mujoco.MjModel, root: str = ROBOT_ROOT) -> np.ndarray:
+    """Ids of ``root`` and all its descendant bodies (empty if there is no such body)."""
+    rid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, root)
+    if rid < 0:
+        return np.zeros(0, np.int32)
+    inside = np.zeros(model.nbody, bool)
+    inside[rid] = True
+    for b in range(rid + 1, model.nbody):  # parents always come before their children
+        inside[b] = inside[model.body_parentid[b]]
+    return np.flatnonzero(inside).astype(np.int32)
+
+
+@dataclass(eq=False)
+class SimSnapshot:
+    """Everything ground truth needs about one rendered frame, so that flow between any two
+    frames can be computed after the fact (``cablesim.sim.flow_gt.gt_flow``).
+
+    ``depth`` is noise-free; ``image`` is what the camera returned (with noise if enabled).
+    ``body`` holds, per pixel, the body id of the geom seen there (-1 for hoses and empty
+    pixels); ``body_pos``/``body_mat`` are the world poses of all bodies.
+    """
+
+    time: float
+    intrinsics: Intrinsics
+    T_world_camera: np.ndarray  # 4x4
+    image: CameraImage
+    depth: np.ndarray  # HxW float32, noise-free metric z-depth, 0 = nothing
+    labels: np.ndarray  # HxW int16
+    body: np.ndarray  # HxW int32
+    hose_vertices: tuple[np.ndarray, ...]  # per hose (V, 3) world
+    hose_twist: tuple[np.ndarray, ...]  # per hose (V - 1,) twist hinge angles, radians
+    hose_radius: float
+    body_pos: np.ndarray  # (nbody, 3)
+    body_mat: np.ndarray  # (nbody, 3, 3)
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def rgb(self) -> np.ndarray:
+        return self.image.rgb
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.labels.shape  # type: ignore[return-value]
+
+    @cached_property
+    def rod(self) -> Any:
+        """Per-snapshot rod segment data for ground-truth flow (computed once)."""
+        from cablesim.sim.flow_gt import RodGeometry
+
+        return RodGeometry.from_snapshot(self)
+
+
+class SimCamera(Camera):
+    """Renders ``world``'s fixed camera offscreen.  Size defaults to ``world.cfg.camera``."""
+
+    def __init__(
+        self,
+        world: World,
+        width: int | None = None,
+        height: int | None = None,
+        depth_noise: bool | None = None,
+        robot_root: str = ROBOT_ROOT,
+    ):
+        c = world.cfg.camera
+        self.world = world
+        self.width = int(c.width if width is None else width)
+        self.height = int(c.height if height is None else height)
+        m = world.model
+        if not (
+            0 < self.width <= m.vis.global_.offwidth and 0 < self.height <= m.vis.global_.offheight
+        ):
+            raise InputError(
+                f"image size {self.width}x{self.height} is outside 1x1 .. "
+                f"{m.vis.global_.offwidth}x{m.vis.global_.offheight} (the model's framebuffer)"
+            )
+        self.depth_noise = bool(c.depth_noise if depth_noise is None else depth_noise)
+        self._noise_std_per_m2 = float(c.depth_noise_std_per_m2)
+        self._rng = rng_streams(world.cfg.seed)["depth_noise"]
+        fovy = float(m.cam_fovy[world.camera_id])
+        self._intrinsics = intrinsics_from_fovy(self.width, self.height, fovy)
+        self._renderer: mujoco.Renderer | None = mujoco.Renderer(m, self.height, self.width)
+        self._option = mujoco.MjvOption()
+        self._option.sitegroup[:] = 0  # sites and tendons are not things a camera sees
+        self._option.flags[mujoco.mjtVisFlag.mjVIS_TENDON] = False
+        self._near = float(m.vis.map.znear * m.stat.extent)
+        self._far = float(m.vis.map.zfar * m.stat.extent)
+        # label lookup tables: geom id -> label / body; flex id -> hose index
+        self.robot_bodies = robot_body_ids(m, robot_root)
+        is_robot = np.zeros(m.nbody, bool)
+        is_robot[self.robot_bodies] = True
+        self._geom_label = np.where(is_robot[m.geom_bodyid], LABEL_ROBOT, LABEL_BACKGROUND)
+        self._flex_label = np.full(max(m.nflex, 1), LABEL_BACKGROUND, np.int16)
+        for i, h in enumerate(world.hoses):
+            self._flex_label[h.flex_id] = i
+        self._twist_qpos = [self._twist_addresses(h) for h in world.hoses]
+
+    # ------------------------------------------------------------------ interface
+    @property
+    def intrinsics(self) -> Intrinsics:
+        return self._intrinsics
+
+    @property
+    def T_world_camera(self) -> np.ndarray:
+        return self.world.T_world_camera.copy()
+
+    def capture(self) -> CameraImage:
+        rgb, depth = self._render_rgbd()
+        return self._image(rgb, depth)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # ------------------------------------------------------------------ sim only
+    def render_labels(self) -> np.ndarray:
+        """HxW int16 labels of the current state (hose index, LABEL_ROBOT, LABEL_BACKGROUND)."""
+        self._update_scene()
+        return self._render_segmentation()[0]
+
+    def snapshot(self, **meta: Any) -> SimSnapshot:
+        """Render RGB, depth and labels of the current state and record the rod and body
+        state, so ground-truth flow to or from any other snapshot can be computed later."""
+        rgb, _ = self._render_rgbd()
+        labels, body, depth = self._render_segmentation()
+        d = self.world.data
+        verts = tuple(self.world.hose_vertices(i) for i in range(len(self.world.hoses)))
+        twist = tuple(d.qpos[adr].copy() for adr in self._twist_qpos)
+        return SimSnapshot(
+            time=float(d.time),
+            intrinsics=self._intrinsics,
+            T_world_camera=self.world.T_world_camera.copy(),
+            image=self._image(rgb, depth),
+            depth=depth,
+            labels=labels,
+            body=body,
+            hose_vertices=verts,
+            hose_twist=twist,
+            hose_radius=float(self.world.cfg.hoses.radius),
+            body_pos=d.xpos.copy(),
+            body_mat=d.xmat.reshape(-1, 3, 3).copy(),
+            meta=dict(meta),
+        )
+
+    # ------------------------------------------------------------------ internals
+    def _twist_addresses(self, hose: Any) -> np.ndarray:
+        """qpos address of each edge's twist hinge: bodies ``{hose}_twist_{k}`` (MuJoCo names
+        the last one ``{hose}_twist``), in body order; empty if the flex has no twist dofs."""
+        m = self.world.model
+        prefix = f"{hose.spec.name}_twist"
+        bodies = [
+            b
+            for b in range(m.nbody)
+            if (name := m.body(b).name) == prefix or name.startswith(prefix + "_")
+        ]
+        if len(bodies) != hose.n_vertices - 1 or any(m.body_jntnum[b] != 1 for b in bodies):
+            return np.zeros(0, np.int64)  # another flex dof type: report zero twist
+        return np.array([m.jnt_qposadr[m.body_jntadr[b]] for b in bodies], np.int64)
+
+    def _ctx(self) -> mujoco.Renderer:
+        if self._renderer is None:
+            raise InputError("the camera was closed")
+        return self._renderer
+
+    def _update_scene(self) -> None:
+        self._ctx().update_scene(self.world.data, self.world.camera_id, self._option)
+
+    def _render_rgbd(self) -> tuple[np.ndarray, np.ndarray]:
+        """RGB and metric depth of the current state from one render pass."""
+        self._update_scene()
+        return self._render_pass()
+
+    def _render_pass(self) -> tuple[np.ndarray, np.ndarray]:
+        """Render the current scene; read colour and metric depth of that same pass."""
+        r = self._ctx()
+        # The public Renderer API renders once per output; mujoco is pinned (4.0.0), so read
+        # colour and depth of one pass through its context (readDepthMap = ZEROFAR).
+        if r._gl_context is not None:  # noqa: SLF001
+            r._gl_context.make_current()  # noqa: SLF001
+        rect = mujoco.MjrRect(0, 0, self.width, self.height)
+        rgb = np.empty((self.height, self.width, 3), np.uint8)
+        raw = np.empty((self.height, self.width), np.float32)
+        mujoco.mjr_render(rect, r.scene, r._mjr_context)  # noqa: SLF001
+        mujoco.mjr_readPixels(rgb, raw, rect, r._mjr_context)  # noqa: SLF001
+        n, f = self._near, self._far
+        # reversed-z depth buffer (1 = near, 0 = far) -> eye-space z
+        depth = (n * f / ((f - n) * raw.astype(np.float64) + n)).astype(np.float32)
+        depth[raw <= 0] = 0.0
+        return np.ascontiguousarray(rgb[::-1]), np.ascontiguousarray(depth[::-1])
+
+    def _render_segmentation(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(labels int16, body id int32, depth float32) per pixel from one segmentation pass
+        of the current scene; its depth matches the labels pixel for pixel."""
+        r = self._ctx()
+        scene = r.scene
+        flags = scene.flags.copy()
+        scene.flags[mujoco.mjtRndFlag.mjRND_SEGMENT] = True
+        scene.flags[mujoco.mjtRndFlag.mjRND_IDCOLOR] = True
+        try:
+            rgb, depth = self._render_pass()
+        finally:
+            np.copyto(scene.flags, flags)
+        segid = (
+            rgb[..., 0].astype(np.int64)
+            + (rgb[..., 1].astype(np.int64) << 8)
+            + (rgb[..., 2].astype(np.int64) << 16)
+        )
+        # segid - 1 indexes the scene's geoms (0 = nothing)
+        n = scene.ngeom
+        objtype = np.full(n + 1, -1, np.int64)
+        objid = np.full(n + 1, -1, np.int64)
+        for g in scene.geoms[:n]:
+            if g.segid >= 0:
+                objtype[g.segid + 1], objid[g.segid + 1] = g.objtype, g.objid
+        segid = np.clip(segid, 0, n)
+        m = self.world.model
+        lut_label = np.full(n + 1, LABEL_BACKGROUND, np.int16)
+        lut_body = np.full(n + 1, -1, np.int32)
+        geom = objtype == int(mujoco.mjtObj.mjOBJ_GEOM)
+        lut_label[geom] = self._geom_label[objid[geom]]
+        lut_body[geom] = m.geom_bodyid[objid[geom]]
+        flex = objtype == int(mujoco.mjtObj.mjOBJ_FLEX)
+        lut_label[flex] = self._flex_label[objid[flex]]
+        return lut_label[segid], lut_body[segid], depth
+
+    def _image(self, rgb: np.ndarray, depth: np.ndarray) -> CameraImage:
+        if self.depth_noise:
+            depth = self._noisy(depth)
+        return CameraImage(rgb, depth, float(self.world.data.time), self._intrinsics)
+
+    def _noisy(self, depth: np.ndarray) -> np.ndarray:
+        rng = self._rng
+        z = depth.astype(np.float64)
+        valid = z > 0
+        noisy = z + rng.standard_normal(z.shape) * self._noise_std_per_m2 * z * z
+        noisy = np.round(noisy / DEPTH_QUANTUM) * DEPTH_QUANTUM
+        pad = np.pad(z, 1, mode="edge")
+        h, w = z.shape
+        jump = np.zeros(z.shape, bool)
+        for dy, dx in ((0, 1), (2, 1), (1, 0), (1, 2)):
+            jump |= np.abs(pad[dy : dy + h, dx : dx + w] - z) > DEPTH_EDGE_JUMP
+        drop = jump & (rng.random(z.shape) < DEPTH_EDGE_DROPOUT)
+        out = np.where(valid & ~drop & (noisy > 0), noisy, 0.0)
+        return out.astype(np.float32)
