@@ -1,0 +1,1 @@
+"""Implementations of the ``cablesim`` subcommands, one module each (see ``cablesim.cli``)."""
