@@ -111,6 +111,7 @@ class RealSenseCamera(Camera):
             if time.monotonic() > deadline:
                 break
             time.sleep(0.005)
+        time.sleep(0.1)  # the last callbacks may still be running
         for sensor in sensors:
             sensor.stop()
             sensor.close()
@@ -206,6 +207,29 @@ def write_recording(
     images: Iterable[CameraImage],
     depth_unit: float = 0.001,
     fps: int = 15,
+    attempts: int = 3,
+) -> int:
+    """Write ``images`` (all of one size) as a RealSense ``.db3`` recording; returns the count.
+
+    librealsense's recorder runs on its own threads and, on a loaded machine, occasionally
+    loses a frame; the file is read back and written again (up to ``attempts`` times) until it
+    holds every frame."""
+    images = list(images)
+    for _ in range(attempts):
+        n = _write_once(path, images, depth_unit, fps)
+        cam = RealSenseCamera(path)
+        held = len(cam._frames)
+        cam.close()
+        if held == n:
+            return n
+    raise RecordingError(f"librealsense kept {held} of {n} frames in {path} after {attempts} tries")
+
+
+def _write_once(
+    path: str | Path,
+    images: Iterable[CameraImage],
+    depth_unit: float = 0.001,
+    fps: int = 15,
 ) -> int:
     """Write ``images`` (all of one size) as a RealSense ``.db3`` recording; returns the count."""
     rs = _rs()
@@ -267,9 +291,9 @@ def write_recording(
                     prof.as_video_stream_profile(),
                 )
                 sensor.on_video_frame(f)
+                queue.wait_for_frame(5000)  # it went through the recorder
             count += 1
-            time.sleep(0.02)  # let the recorder drain its queue
-        time.sleep(0.3)
+        time.sleep(0.1)
     finally:
         for sensor in (depth_sensor, color_sensor):
             sensor.stop()
