@@ -1,0 +1,153 @@
+"""Typed, seeded, printable configuration of one interaction (SPEC section 3).
+
+    cfg = EpisodeConfig(seed=3, hose=1)
+    print(cfg)                          # JSON
+    EpisodeConfig.from_dict(cfg.to_dict()) == cfg
+
+``seed`` is the one seed of an episode: it replaces ``scene.seed`` (the scene is built from it)
+and draws the episode's own random choices (hose, segment) from
+``rng_streams(seed)["episode"]``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from cablesim.config import check_positive, from_dict, pretty, to_dict
+from cablesim.errors import ConfigError
+from cablesim.sim.config import SceneConfig
+
+#: Named action directions (see :func:`cablesim.episode.primitives.action_direction`).
+DIRECTION_NAMES = ("along", "across", "normal", "vertical", "horizontal")
+
+
+@dataclass
+class GraspConfig:
+    """Pre-grasp, approach along the board normal, close, verify the hold."""
+
+    pregrasp_offset: float = 0.08  # m in front of the grasp point, against the approach
+    surface_offset: float = 0.0075  # m from the seen surface to the hose axis (its radius)
+    approach_speed: float = 0.05  # m/s for the last straight approach
+    travel_speed: float = 0.25  # m/s for free motions
+    width: float = 0.015  # m, hose diameter the gripper closes on
+    force: float = 70.0  # N
+    epsilon: float = 0.012  # m, accepted opening around ``width`` (franky epsilon)
+    hold_check_distance: float = 0.01  # m pulled back from the board to test the hold
+    hold_tolerance: float = 0.005  # m, hose point vs hand displacement (sim verification)
+    open_width: float = 0.08
+
+    def validate(self) -> None:
+        for name in ("pregrasp_offset", "approach_speed", "travel_speed", "width", "force"):
+            check_positive(f"grasp.{name}", getattr(self, name))
+        check_positive("grasp.hold_check_distance", self.hold_check_distance, allow_zero=True)
+        check_positive("grasp.hold_tolerance", self.hold_tolerance)
+
+
+@dataclass
+class ActionConfig:
+    """Periodic actions g1 -> g1+D -> g1 -> g1-D -> g1, ``periods`` times, per direction."""
+
+    directions: tuple[str, ...] = ("along", "across")
+    extra_directions: tuple[tuple[float, float, float], ...] = ()  # world vectors
+    amplitude: float = 0.02  # |D| in metres
+    periods: int = 3  # K_p
+    speed: float = 0.05  # m/s peak TCP speed of each stroke
+
+    def validate(self) -> None:
+        for d in self.directions:
+            if d not in DIRECTION_NAMES:
+                raise ConfigError("actions.directions", f"unknown {d!r}; use {DIRECTION_NAMES}")
+        for i, v in enumerate(self.extra_directions):
+            if len(v) != 3 or sum(x * x for x in v) < 1e-12:
+                raise ConfigError(f"actions.extra_directions[{i}]", f"bad vector {v!r}")
+        if not self.directions and not self.extra_directions:
+            raise ConfigError("actions.directions", "need at least one action direction")
+        check_positive("actions.amplitude", self.amplitude)
+        check_positive("actions.speed", self.speed)
+        if not isinstance(self.periods, int) or self.periods < 1:
+            raise ConfigError("actions.periods", f"must be an integer >= 1, got {self.periods!r}")
+
+
+@dataclass
+class CaptureConfig:
+    """Camera triggering on simulated time and the kept-sample rule (SPEC 3.5)."""
+
+    frame_rate: float = 15.0  # frames per second of simulated time (RealSense rate)
+    min_gripper_step: float = 0.001  # delta_g in metres; 0 keeps every frame
+    ground_truth: bool = True  # labels and flow in FrameTruth (simulation only)
+
+    def validate(self) -> None:
+        check_positive("capture.frame_rate", self.frame_rate)
+        check_positive("capture.min_gripper_step", self.min_gripper_step, allow_zero=True)
+
+
+@dataclass
+class RetreatConfig:
+    """Release, back off, move to a joint configuration out of view, settle."""
+
+    back_off: float = 0.12  # m pulled back along -approach after release
+    # the retract configuration turned away about joint 1: zero robot pixels in the default
+    # camera for joint 1 in [-2.10, -1.70] (tests/episode/test_retreat.py checks -1.9)
+    qpos: tuple[float, ...] = (-1.9, -0.6, 0.0, -2.3, 0.0, 1.7, 0.785398)
+    speed_factor: float = 0.5
+    verify: bool = True  # render labels of the target frame and insist on zero robot pixels
+    settle_speed: float = 0.001  # m/s, every hose vertex slower than this
+    settle_max_time: float = 6.0  # s of simulated time
+    settle_check_every: float = 0.1  # s
+
+    def validate(self) -> None:
+        if len(self.qpos) != 7:
+            raise ConfigError("retreat.qpos", f"need 7 joint angles, got {len(self.qpos)}")
+        check_positive("retreat.back_off", self.back_off, allow_zero=True)
+        check_positive("retreat.settle_speed", self.settle_speed)
+        check_positive("retreat.settle_max_time", self.settle_max_time)
+
+
+@dataclass
+class EpisodeConfig:
+    """One interaction: scene, which hose, grasp, actions, capture, retreat."""
+
+    seed: int = 0
+    hose: int | None = None  # None: drawn from the episode generator
+    kind: str = "grasp"  # "grasp" or "push"
+    push_depth: float = 0.02  # m pressed into the hose by a push, along the approach
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    grasp: GraspConfig = field(default_factory=GraspConfig)
+    actions: ActionConfig = field(default_factory=ActionConfig)
+    capture: CaptureConfig = field(default_factory=CaptureConfig)
+    retreat: RetreatConfig = field(default_factory=RetreatConfig)
+    progress: bool = False  # print progress lines
+
+    def validate(self) -> EpisodeConfig:
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
+        if self.hose is not None and not 0 <= self.hose < self.scene.hoses.count:
+            raise ConfigError("hose", f"{self.hose} is not one of {self.scene.hoses.count} hoses")
+        if self.kind not in ("grasp", "push"):
+            raise ConfigError("kind", f"must be 'grasp' or 'push', got {self.kind!r}")
+        check_positive("push_depth", self.push_depth)
+        self.scene_config().validate()
+        self.grasp.validate()
+        self.actions.validate()
+        self.capture.validate()
+        self.retreat.validate()
+        return self
+
+    def scene_config(self) -> SceneConfig:
+        """The scene, with ``seed`` as its seed."""
+        return dataclasses.replace(self.scene, seed=self.seed)
+
+    def replace(self, **changes: Any) -> EpisodeConfig:
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return to_dict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> EpisodeConfig:
+        return from_dict(cls, data)
+
+    def __str__(self) -> str:
+        return pretty(self)

@@ -1,0 +1,323 @@
+"""Interaction primitives on the :class:`~cablesim.robot.base.Robot` interface (SPEC section 3).
+
+They only use the robot interface, so the same code drives the simulated Panda and the real
+one.  None of them raises for an unreachable target, a joint limit or a collision: each
+returns a :class:`PrimitiveResult` that is falsy and says why.
+
+- :func:`grasp_at`: pre-grasp in front of the point, straight approach along the board normal,
+  close across the hose axis, and a hold check (pull back by a few millimetres and compare the
+  hose point's motion with the hand's).  The hose point is only observable in simulation: the
+  check takes an optional ``hose_point`` probe (ground truth, used for *verification* only,
+  never by perception); without one (real robot) the gripper's opening decides, as in franky.
+- :func:`periodic_action`: g1 -> g1+D -> g1 -> g1-D -> g1, ``periods`` times, along any
+  direction.
+- :func:`push`: the closed gripper presses by a displacement and returns, ``periods`` times.
+- :func:`release`, :func:`retreat`: open, back off along the approach, joint motion out of view.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from cablesim.episode.config import ActionConfig, GraspConfig, RetreatConfig
+from cablesim.robot.base import MoveResult, Robot
+from cablesim.robot.grasping import move_joints_safely
+from cablesim.robot.pose import Pose, grasp_pose
+from cablesim.robot.sim_panda import RETRACT_QPOS
+
+#: The default approach: the hand points at the board (world +x); the board normal is -x.
+DEFAULT_APPROACH = (1.0, 0.0, 0.0)
+
+HosePointProbe = Callable[[], np.ndarray]
+
+
+@dataclass
+class PrimitiveResult:
+    """Outcome of a primitive; truthy on success.  ``details`` holds measured numbers."""
+
+    success: bool
+    reason: str = ""
+    pose: Pose | None = None
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def __bool__(self) -> bool:
+        return self.success
+
+    @staticmethod
+    def fail(step: str, move: MoveResult | str, **details: Any) -> PrimitiveResult:
+        why = move if isinstance(move, str) else move.reason
+        return PrimitiveResult(False, f"{step}: {why}", details=dict(details))
+
+
+def _unit(v: Sequence[float] | np.ndarray) -> np.ndarray:
+    v = np.asarray(v, dtype=float).reshape(3)
+    n = float(np.linalg.norm(v))
+    if n < 1e-12 or not np.isfinite(n):
+        raise ValueError(f"not a direction: {v}")
+    return v / n
+
+
+# ---------------------------------------------------------------------- directions
+def action_direction(
+    name: str,
+    axis_world: np.ndarray,
+    T_world_camera: np.ndarray,
+    approach: Sequence[float] = DEFAULT_APPROACH,
+) -> np.ndarray:
+    """Unit world direction of a named action (SPEC 3.3).
+
+    - ``along``: the hose axis projected onto the image plane (camera z removed);
+    - ``across``: perpendicular to ``along`` in the board plane (board normal = -approach);
+    - ``normal``: the board normal (towards the camera); ``vertical``: world z;
+      ``horizontal``: in the board plane, perpendicular to world z.
+    """
+    n = -_unit(approach)
+    R = np.asarray(T_world_camera, dtype=float)[:3, :3]
+    a_cam = R.T @ _unit(axis_world)
+    a_cam[2] = 0.0
+    if np.linalg.norm(a_cam) < 1e-6:  # axis along the optical axis: use the board plane
+        along = axis_world - np.dot(axis_world, n) * n
+    else:
+        along = R @ a_cam
+    along = _unit(along)
+    if name == "along":
+        return along
+    if name == "across":
+        return _unit(np.cross(n, along))
+    if name == "normal":
+        return n
+    if name == "vertical":
+        return np.array([0.0, 0.0, 1.0])
+    if name == "horizontal":
+        return _unit(np.cross(n, [0.0, 0.0, 1.0]))
+    raise ValueError(f"unknown action direction {name!r}")
+
+
+def action_directions(
+    cfg: ActionConfig,
+    axis_world: np.ndarray,
+    T_world_camera: np.ndarray,
+    approach: Sequence[float] = DEFAULT_APPROACH,
+) -> list[tuple[str, np.ndarray]]:
+    """(label, unit world direction) of every configured action, in order."""
+    out = [(d, action_direction(d, axis_world, T_world_camera, approach)) for d in cfg.directions]
+    out += [(f"vector{i}", _unit(v)) for i, v in enumerate(cfg.extra_directions)]
+    return out
+
+
+# ---------------------------------------------------------------------- grasp
+def _to_pose_via_retract(robot: Robot, pose: Pose, speed_factor: float = 0.5) -> MoveResult:
+    """Joint motion to ``pose`` through the retract configuration (hand down, pulled back),
+    so that the arm does not sweep through the hoses, which the arm-only checks cannot see."""
+    q = robot.solve_ik(pose)
+    if q is None:
+        return MoveResult(False, "no IK solution")
+    r = move_joints_safely(robot, RETRACT_QPOS, speed_factor)
+    if not r:
+        return MoveResult(False, f"could not retract first: {r.reason}")
+    return robot.move_joints(q, speed_factor)
+
+
+def choose_grasp_pose(
+    robot: Robot,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    approach: Sequence[float] = DEFAULT_APPROACH,
+    pregrasp_offset: float = 0.08,
+) -> tuple[Pose | None, str]:
+    """A reachable grasp pose (of the two hand flips) whose pre-grasp is reachable too."""
+    reasons = []
+    app = _unit(approach)
+    for flip in (False, True):
+        try:
+            g = grasp_pose(centre, axis, approach=app, flip=flip)
+        except ValueError as e:
+            return None, str(e)
+        ok, why = robot.check_reachable(g)
+        if ok:
+            ok, why = robot.check_reachable(g.translated(-pregrasp_offset * app))
+            why = f"pre-grasp {why}" if not ok else why
+        if ok:
+            return g, ""
+        reasons.append(f"{'flipped' if flip else 'upright'} hand: {why}")
+    return None, "unreachable (" + "; ".join(reasons) + ")"
+
+
+def grasp_at(
+    robot: Robot,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    cfg: GraspConfig | None = None,
+    approach: Sequence[float] = DEFAULT_APPROACH,
+    hose_point: Callable[[Pose], HosePointProbe | None] | None = None,
+) -> PrimitiveResult:
+    """Grasp at world point ``centre`` with the fingers closing across world ``axis``.
+
+    ``hose_point(grasp_pose)`` (simulation only) returns a probe of the grasped hose's
+    material point, used to verify that the hose follows the hand within
+    ``cfg.hold_tolerance``; it may return None when no hose is near the hand.
+    """
+    cfg = cfg or GraspConfig()
+    app = _unit(approach)
+    g, why = choose_grasp_pose(robot, centre, axis, app, cfg.pregrasp_offset)
+    if g is None:
+        return PrimitiveResult(False, f"grasp: {why}")
+    pre = g.translated(-cfg.pregrasp_offset * app)
+    if not robot.open(cfg.open_width):
+        return PrimitiveResult.fail("grasp", "the gripper did not open")
+    r = _to_pose_via_retract(robot, pre)
+    if not r:
+        return PrimitiveResult.fail("move to pre-grasp", r)
+    r = robot.move_to(g, speed=cfg.approach_speed)
+    if not r:
+        return PrimitiveResult.fail("approach", r)
+    held = robot.grasp(
+        width=cfg.width,
+        force=cfg.force,
+        epsilon_inner=cfg.epsilon,
+        epsilon_outer=cfg.epsilon,
+    )
+    opening = robot.gripper_opening
+    if not held:
+        return PrimitiveResult.fail(
+            "close", f"nothing held (fingers closed to {opening * 1000:.1f} mm)", opening=opening
+        )
+    details: dict[str, Any] = {"opening": opening}
+    probe = hose_point(g) if hose_point is not None else None
+    if hose_point is not None and probe is None:
+        return PrimitiveResult.fail("close", "no hose between the fingers", **details)
+    if probe is not None and cfg.hold_check_distance > 0:
+        p0, h0 = probe(), robot.ee_pose().position
+        r = robot.move_to(g.translated(-cfg.hold_check_distance * app), speed=cfg.approach_speed)
+        if not r:
+            return PrimitiveResult.fail("hold check", r, **details)
+        p1, h1 = probe(), robot.ee_pose().position
+        err = float(np.linalg.norm((p1 - p0) - (h1 - h0)))
+        details["hold_error"] = err
+        r = robot.move_to(g, speed=cfg.approach_speed)
+        if not r:
+            return PrimitiveResult.fail("hold check return", r, **details)
+        if err > cfg.hold_tolerance:
+            return PrimitiveResult.fail(
+                "hold check",
+                f"the hose lagged the hand by {err * 1000:.1f} mm "
+                f"(tolerance {cfg.hold_tolerance * 1000:.1f} mm)",
+                **details,
+            )
+    return PrimitiveResult(True, "", pose=g, details=details)
+
+
+# ---------------------------------------------------------------------- actions
+def periodic_waypoints(
+    g1: Pose, direction: np.ndarray, amplitude: float, periods: int, one_sided: bool = False
+) -> list[Pose]:
+    """g1+D, g1, g1-D, g1 per period (or g1+D, g1 per period when ``one_sided``)."""
+    D = amplitude * _unit(direction)
+    one = [g1.translated(D), g1] if one_sided else [g1.translated(D), g1, g1.translated(-D), g1]
+    return one * int(periods)
+
+
+def _run_waypoints(
+    robot: Robot,
+    waypoints: list[Pose],
+    speed: float,
+    step: str,
+    between: Callable[[int], None] | None = None,
+) -> PrimitiveResult:
+    for i, w in enumerate(waypoints):
+        r = robot.move_to(w, speed=speed)
+        if not r:
+            return PrimitiveResult.fail(f"{step} stroke {i + 1}/{len(waypoints)}", r)
+        if between is not None:
+            between(i)
+    return PrimitiveResult(True, pose=waypoints[-1] if waypoints else None)
+
+
+def periodic_action(
+    robot: Robot,
+    g1: Pose,
+    direction: np.ndarray,
+    amplitude: float = 0.02,
+    periods: int = 3,
+    speed: float = 0.05,
+) -> PrimitiveResult:
+    """Move g1 -> g1+D -> g1 -> g1-D -> g1, ``periods`` times; D = ``amplitude`` * direction."""
+    way = periodic_waypoints(g1, direction, amplitude, periods)
+    return _run_waypoints(robot, way, speed, "action")
+
+
+def push(
+    robot: Robot,
+    g1: Pose,
+    direction: np.ndarray,
+    depth: float = 0.02,
+    periods: int = 1,
+    speed: float = 0.05,
+) -> PrimitiveResult:
+    """With the gripper closed and holding nothing, press from ``g1`` by ``depth`` along
+    ``direction`` and come back, ``periods`` times (the poking stick of thesis chapter 4)."""
+    if robot.gripper_opening > 0.005:
+        robot.open(0.0)  # closed fingers: a blunt poker
+    way = periodic_waypoints(g1, direction, depth, periods, one_sided=True)
+    return _run_waypoints(robot, way, speed, "push")
+
+
+def approach_for_push(
+    robot: Robot,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    cfg: GraspConfig | None = None,
+    approach: Sequence[float] = DEFAULT_APPROACH,
+    standoff: float = 0.02,
+) -> PrimitiveResult:
+    """Close the gripper and bring it to ``standoff`` in front of the hose point."""
+    cfg = cfg or GraspConfig()
+    app = _unit(approach)
+    g, why = choose_grasp_pose(robot, centre, axis, app, cfg.pregrasp_offset)
+    if g is None:
+        return PrimitiveResult(False, f"push: {why}")
+    g = g.translated(-standoff * app)
+    robot.open(0.0)
+    r = _to_pose_via_retract(robot, g.translated(-cfg.pregrasp_offset * app))
+    if not r:
+        return PrimitiveResult.fail("move to pre-push", r)
+    r = robot.move_to(g, speed=cfg.approach_speed)
+    if not r:
+        return PrimitiveResult.fail("push approach", r)
+    return PrimitiveResult(True, pose=g)
+
+
+# ---------------------------------------------------------------------- leave
+def release(robot: Robot, width: float = 0.08) -> PrimitiveResult:
+    ok = robot.open(width)
+    return PrimitiveResult(ok, "" if ok else "release: the gripper did not open")
+
+
+def retreat(
+    robot: Robot,
+    cfg: RetreatConfig | None = None,
+    approach: Sequence[float] = DEFAULT_APPROACH,
+    travel_speed: float = 0.25,
+) -> PrimitiveResult:
+    """Back off along -approach (if possible) and move to the out-of-view joint configuration."""
+    cfg = cfg or RetreatConfig()
+    notes = []
+    if cfg.back_off > 0:
+        r = robot.move_relative(-cfg.back_off * _unit(approach), speed=travel_speed)
+        if not r:
+            notes.append(f"back-off skipped ({r.reason})")
+    # through the retract configuration: the straight joint path from an arm stretched
+    # towards the board would sweep the hand along the board and through the hoses
+    r = move_joints_safely(robot, RETRACT_QPOS, cfg.speed_factor)
+    if not r:
+        notes.append(f"retract skipped ({r.reason})")
+    r = robot.move_joints(np.asarray(cfg.qpos, dtype=float), speed_factor=cfg.speed_factor)
+    if not r:
+        return PrimitiveResult.fail(
+            "retreat", f"{r.reason} ({'; '.join(notes)})" if notes else r.reason, notes=notes
+        )
+    return PrimitiveResult(True, details={"notes": notes})
