@@ -114,6 +114,7 @@ class SimCamera(Camera):
         height: int | None = None,
         depth_noise: bool | None = None,
         robot_root: str = ROBOT_ROOT,
+        antialias_samples: int = 0,
     ):
         c = world.cfg.camera
         self.world = world
@@ -132,7 +133,14 @@ class SimCamera(Camera):
         self._rng = rng_streams(world.cfg.seed)["depth_noise"]
         fovy = float(m.cam_fovy[world.camera_id])
         self._intrinsics = intrinsics_from_fovy(self.width, self.height, fovy)
-        self._renderer: mujoco.Renderer | None = mujoco.Renderer(m, self.height, self.width)
+        # multisampling costs 2-3x on software OpenGL and blurs label boundaries: off by
+        # default (the model's setting is restored once the renderer exists)
+        samples = m.vis.quality.offsamples
+        m.vis.quality.offsamples = int(antialias_samples)
+        try:
+            self._renderer: mujoco.Renderer | None = mujoco.Renderer(m, self.height, self.width)
+        finally:
+            m.vis.quality.offsamples = samples
         self._option = mujoco.MjvOption()
         self._option.sitegroup[:] = 0  # sites and tendons are not things a camera sees
         self._option.flags[mujoco.mjtVisFlag.mjVIS_TENDON] = False

@@ -142,7 +142,9 @@ def _axis_rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.eye(3)[None] + s * k + (1 - c) * np.einsum("nij,njk->nik", k, k)
 
 
-def edge_rotations(src: RodGeometry, dst: RodGeometry) -> np.ndarray:
+def edge_rotations(
+    src: RodGeometry, dst: RodGeometry, hoses: np.ndarray | None = None
+) -> np.ndarray:
     """(E, 3, 3) rotation of each edge's material frame from ``src`` to ``dst``.
 
     The bending part is the best-fit (Kabsch) rotation of the edge's neighbourhood (its own
@@ -150,10 +152,11 @@ def edge_rotations(src: RodGeometry, dst: RodGeometry) -> np.ndarray:
     dst tangent; where the neighbourhood is straight in either frame the roll about the
     tangent cannot be seen from the centreline and the smallest rotation is used.  The twist
     part rotates about the dst tangent by the change of the edge's twist angle (a positive
-    angle turns right-handedly about the vertex k -> k+1 direction)."""
+    angle turns right-handedly about the vertex k -> k+1 direction).  Only ``hoses`` (all by
+    default) are computed; the other edges get the identity."""
     n = len(src.a)
-    R = np.zeros((n, 3, 3))
-    for h in range(len(src.verts)):
+    R = np.tile(np.eye(3), (n, 1, 1))
+    for h in range(len(src.verts)) if hoses is None else (int(x) for x in hoses):
         vs, vd = src.verts[h], dst.verts[h]
         if vs.shape != vd.shape:
             raise InputError("the two snapshots have hoses with different vertex counts")
@@ -223,16 +226,17 @@ def gt_flow(src: SimSnapshot, dst: SimSnapshot) -> GTFlow:
         ]
         + [False]
     )
-    hose_px = (src.labels >= 0) & (src.depth > 0)
-    hose_px[hose_px] = moved_hose[src.labels[hose_px]]
-    body_px = (src.body >= 0) & (src.depth > 0)
-    body_px[body_px] = moved_body[src.body[body_px]]
+    seen = src.depth > 0
     cam_moved = not np.array_equal(src.T_world_camera, dst.T_world_camera)
-    static_px = ~(hose_px | body_px)
     if cam_moved:  # a moving camera makes every visible pixel move
-        hose_px = (src.labels >= 0) & (src.depth > 0)
-        body_px = (src.body >= 0) & (src.depth > 0)
-        static_px = ~(hose_px | body_px)
+        moved_hose[:] = True
+        moved_body[:] = True
+    # look-up tables indexed by label + 2 (labels >= -2) and body + 1 (body >= -1)
+    hose_lut = np.concatenate([[False, False], moved_hose[:-1]])
+    body_lut = np.concatenate([[False], moved_body])
+    hose_px = hose_lut[src.labels.astype(np.int64) + 2] & seen
+    body_px = body_lut[src.body.astype(np.int64) + 1] & seen & (src.labels < 0)
+    static_px = ~(hose_px | body_px)
 
     Ts, Td = src.T_world_camera, dst.T_world_camera
     moving = hose_px | body_px
@@ -260,11 +264,8 @@ def gt_flow(src: SimSnapshot, dst: SimSnapshot) -> GTFlow:
             nf = np.einsum("ij,ij->i", fh, normals)[:, None] * normals
             normal_flow[vv[hv], uu[hv]] = nf.astype(np.float32)
 
-    valid = np.zeros((h, w), bool)
     # static pixels: visible in dst if dst shows the same kind of thing at the same depth
-    valid[static_px] = _visible(
-        src.labels[static_px], src.depth[static_px], dst, *np.nonzero(static_px)[::-1]
-    )
+    valid = _visible_in_place(src, dst) & static_px
     if len(vv):
         tu, tv = target_uv[:, 0], target_uv[:, 1]
         inside = (tu > -0.5) & (tu < w - 0.5) & (tv > -0.5) & (tv < h - 0.5)
@@ -276,6 +277,13 @@ def gt_flow(src: SimSnapshot, dst: SimSnapshot) -> GTFlow:
         )
         valid[vv, uu] = ok
     return GTFlow(flow, valid, normal_flow)
+
+
+def _visible_in_place(src: SimSnapshot, dst: SimSnapshot) -> np.ndarray:
+    """Per pixel: does dst show what src shows at the same pixel (same label, same depth)?"""
+    zs, zd = src.depth, dst.depth
+    near = np.abs(zd - zs) <= DEPTH_TOL_ABS + DEPTH_TOL_REL * zs
+    return (src.labels == dst.labels) & ((near & (zd > 0)) | ((zd == 0) & (zs == 0)))
 
 
 def _visible(
@@ -294,7 +302,7 @@ def _carry_hose(
     normals (unit, (N, 2)) at them."""
     rs, rd = src.rod, dst.rod
     edge, tau = rs.nearest_edges(X, hose)
-    R = edge_rotations(rs, rd)[edge]
+    R = edge_rotations(rs, rd, np.unique(hose))[edge]
     base_s = rs.a[edge] + tau[:, None] * (rs.b[edge] - rs.a[edge])
     base_d = rd.a[edge] + tau[:, None] * (rd.b[edge] - rd.a[edge])
     Y = base_d + np.einsum("nij,nj->ni", R, X - base_s)
