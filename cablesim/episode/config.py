@@ -83,22 +83,34 @@ class CaptureConfig:
         check_positive("capture.min_gripper_step", self.min_gripper_step, allow_zero=True)
 
 
+#: The retract configuration turned away about joint 1: zero robot pixels in the default camera
+#: for joint 1 in [-2.10, -1.70] (tests/episode/test_retreat.py checks it).
+FALLBACK_RETREAT_QPOS = (-1.9, -0.6, 0.0, -2.3, 0.0, 1.7, 0.785398)
+
+
 @dataclass
 class RetreatConfig:
     """Release, back off, move to a joint configuration out of view, settle."""
 
     back_off: float = 0.12  # m pulled back along -approach after release
-    # the retract configuration turned away about joint 1: zero robot pixels in the default
-    # camera for joint 1 in [-2.10, -1.70] (tests/episode/test_retreat.py checks -1.9)
-    qpos: tuple[float, ...] = (-1.9, -0.6, 0.0, -2.3, 0.0, 1.7, 0.785398)
+    # joint configuration out of view; None: the scene's ``robot.park_qpos`` when it has one,
+    # else FALLBACK_RETREAT_QPOS.  The target frame is checked for zero robot pixels.
+    qpos: tuple[float, ...] | None = None
     speed_factor: float = 0.5
     verify: bool = True  # render labels of the target frame and insist on zero robot pixels
     settle_speed: float = 0.001  # m/s, every hose vertex slower than this
     settle_max_time: float = 6.0  # s of simulated time
     settle_check_every: float = 0.1  # s
 
+    def joint_target(self, scene: Any = None) -> tuple[float, ...]:
+        """The retreat joint configuration (see ``qpos``) for a scene config."""
+        if self.qpos is not None:
+            return tuple(self.qpos)
+        park = getattr(getattr(scene, "robot", None), "park_qpos", None)
+        return tuple(park) if park is not None else FALLBACK_RETREAT_QPOS
+
     def validate(self) -> None:
-        if len(self.qpos) != 7:
+        if self.qpos is not None and len(self.qpos) != 7:
             raise ConfigError("retreat.qpos", f"need 7 joint angles, got {len(self.qpos)}")
         check_positive("retreat.back_off", self.back_off, allow_zero=True)
         check_positive("retreat.settle_speed", self.settle_speed)

@@ -4,8 +4,8 @@ They only use the robot interface, so the same code drives the simulated Panda a
 one.  None of them raises for an unreachable target, a joint limit or a collision: each
 returns a :class:`PrimitiveResult` that is falsy and says why.
 
-- :func:`grasp_at`: pre-grasp in front of the point, straight approach along the board normal,
-  close across the hose axis, and a hold check (pull back by a few millimetres and compare the
+- :func:`grasp_at`: pre-grasp in front of the point, straight approach along the board normal
+  (made orthogonal to the hose axis: the hand's approach axis), close across the hose axis, and a hold check (pull back by a few millimetres and compare the
   hose point's motion with the hand's).  The hose point is only observable in simulation: the
   check takes an optional ``hose_point`` probe (ground truth, used for *verification* only,
   never by perception); without one (real robot) the gripper's opening decides, as in franky.
@@ -129,7 +129,8 @@ def choose_grasp_pose(
     approach: Sequence[float] = DEFAULT_APPROACH,
     pregrasp_offset: float = 0.08,
 ) -> tuple[Pose | None, str]:
-    """A reachable grasp pose (of the two hand flips) whose pre-grasp is reachable too."""
+    """A reachable grasp pose (of the two hand flips) whose pre-grasp (``pregrasp_offset``
+    back along the hand's approach axis) is reachable too."""
     reasons = []
     app = _unit(approach)
     for flip in (False, True):
@@ -139,7 +140,7 @@ def choose_grasp_pose(
             return None, str(e)
         ok, why = robot.check_reachable(g)
         if ok:
-            ok, why = robot.check_reachable(g.translated(-pregrasp_offset * app))
+            ok, why = robot.check_reachable(g.translated(-pregrasp_offset * g.rotation[:, 2]))
             why = f"pre-grasp {why}" if not ok else why
         if ok:
             return g, ""
@@ -166,6 +167,7 @@ def grasp_at(
     g, why = choose_grasp_pose(robot, centre, axis, app, cfg.pregrasp_offset)
     if g is None:
         return PrimitiveResult(False, f"grasp: {why}")
+    app = g.rotation[:, 2]  # the hand's approach axis: the board normal made orthogonal to the hose
     pre = g.translated(-cfg.pregrasp_offset * app)
     if not robot.open(cfg.open_width):
         return PrimitiveResult.fail("grasp", "the gripper did not open")
@@ -280,6 +282,7 @@ def approach_for_push(
     g, why = choose_grasp_pose(robot, centre, axis, app, cfg.pregrasp_offset)
     if g is None:
         return PrimitiveResult(False, f"push: {why}")
+    app = g.rotation[:, 2]
     g = g.translated(-standoff * app)
     robot.open(0.0)
     r = _to_pose_via_retract(robot, g.translated(-cfg.pregrasp_offset * app))
@@ -299,11 +302,13 @@ def release(robot: Robot, width: float = 0.08) -> PrimitiveResult:
 
 def retreat(
     robot: Robot,
+    qpos: Sequence[float],
     cfg: RetreatConfig | None = None,
     approach: Sequence[float] = DEFAULT_APPROACH,
     travel_speed: float = 0.25,
 ) -> PrimitiveResult:
-    """Back off along -approach (if possible) and move to the out-of-view joint configuration."""
+    """Back off along -approach (if possible), then joint motion through the retract
+    configuration to ``qpos`` (out of the camera's view)."""
     cfg = cfg or RetreatConfig()
     notes = []
     if cfg.back_off > 0:
@@ -315,7 +320,7 @@ def retreat(
     r = move_joints_safely(robot, RETRACT_QPOS, cfg.speed_factor)
     if not r:
         notes.append(f"retract skipped ({r.reason})")
-    r = robot.move_joints(np.asarray(cfg.qpos, dtype=float), speed_factor=cfg.speed_factor)
+    r = robot.move_joints(np.asarray(qpos, dtype=float), speed_factor=cfg.speed_factor)
     if not r:
         return PrimitiveResult.fail(
             "retreat", f"{r.reason} ({'; '.join(notes)})" if notes else r.reason, notes=notes

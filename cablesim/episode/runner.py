@@ -214,7 +214,9 @@ def run_episode(
         sp = segment_pose(mask, image.depth, image.intrinsics)
     except InputError as e:
         return EpisodeResult(False, f"segment: {e}")
-    centre = _camera_to_world(T, sp.centre) + cfg.grasp.surface_offset * approach
+    # the seen surface lies one radius in front of the hose axis along the viewing ray
+    ray = _camera_to_world(T, sp.centre / np.linalg.norm(sp.centre), direction=True)
+    centre = _camera_to_world(T, sp.centre) + cfg.grasp.surface_offset * ray
     axis = _camera_to_world(T, sp.axis, direction=True)
     hose = _hose_under(camera, mask, cfg.hose) if cfg.capture.ground_truth else cfg.hose
     say(f"segment: {int(mask.sum())} px, centre {np.round(centre, 3)}, hose {hose}")
@@ -238,7 +240,7 @@ def run_episode(
     if not g:
         say(f"failed: {g.reason}")
         moved = not g.reason.startswith(("grasp:", "push:"))  # those fail before moving
-        return _abort(result, robot, cfg, g.reason, say, moved=moved)
+        return _abort(result, robot, world, cfg, g.reason, say, moved=moved)
     result.grasp = g.pose
     assert g.pose is not None
     say(
@@ -285,15 +287,21 @@ def run_episode(
         result.actions.append(rep)
         say(f"action {a} ({label}): {kept}/{rep.ticks} frames kept, gain {gain:.3f}")
         if not r:
-            return _abort(result, robot, cfg, f"action {a} ({label}): {r.reason}", say)
+            return _abort(result, robot, world, cfg, f"action {a} ({label}): {r.reason}", say)
     result.timings["actions"] = time.perf_counter() - t0
 
     # 4. release, out of view, settle, target frame
     t0 = time.perf_counter()
     r = prim.release(robot, cfg.grasp.open_width)
     if not r:
-        return _abort(result, robot, cfg, r.reason, say)
-    r = prim.retreat(robot, cfg.retreat, approach, cfg.grasp.travel_speed)
+        return _abort(result, robot, world, cfg, r.reason, say)
+    r = prim.retreat(
+        robot,
+        cfg.retreat.joint_target(getattr(world, "cfg", None)),
+        cfg.retreat,
+        approach,
+        cfg.grasp.travel_speed,
+    )
     if not r:
         return _fail(result, r.reason, say)
     settled, speed = settle_hoses(
@@ -316,7 +324,9 @@ def run_episode(
     # 5. ground truth flow from the target to each kept frame
     say(f"target frame captured; ground-truth flow for {len(collector.frames) - 1} frames")
     collector.add_flows(say)
-    result.stream = Stream(collector.frames, meta=_stream_meta(cfg, result, directions))
+    meta = _stream_meta(cfg, result, directions)
+    meta["T_world_camera"] = T.tolist()
+    result.stream = Stream(collector.frames, meta=meta)
     result.success = True
     total = time.perf_counter() - t_start
     result.timings.update(
@@ -371,6 +381,7 @@ def _fail(result: EpisodeResult, reason: str, say: Callable[[str], None]) -> Epi
 def _abort(
     result: EpisodeResult,
     robot: Robot,
+    world: Any,
     cfg: EpisodeConfig,
     reason: str,
     say: Callable[[str], None],
@@ -379,7 +390,13 @@ def _abort(
     """Leave the scene clean (open, retreat) after a failure, then report it."""
     if moved:
         prim.release(robot, cfg.grasp.open_width)
-        r = prim.retreat(robot, cfg.retreat, prim.DEFAULT_APPROACH, cfg.grasp.travel_speed)
+        r = prim.retreat(
+            robot,
+            cfg.retreat.joint_target(getattr(world, "cfg", None)),
+            cfg.retreat,
+            prim.DEFAULT_APPROACH,
+            cfg.grasp.travel_speed,
+        )
         if not r:
             reason += f"; retreat after the failure failed too ({r.reason})"
     return _fail(result, reason, say)
