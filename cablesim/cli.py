@@ -18,6 +18,7 @@ from cablesim.errors import CablesimError
 # name -> one-line help; implementation in cablesim.commands.<name>
 SUBCOMMANDS: dict[str, str] = {
     "scene": "build and settle a scene, render RGB/depth/labels, move a hose, write GT flow",
+    "episode": "one interaction: grasp a hose, periodic actions, retreat, target frame, record",
 }
 
 

@@ -54,6 +54,7 @@ class ActionConfig:
     amplitude: float = 0.02  # |D| in metres
     periods: int = 3  # K_p
     speed: float = 0.05  # m/s peak TCP speed of each stroke
+    stroke_tolerance: float = 0.01  # m a stroke may end off its target (a taut hose pulls back)
 
     def validate(self) -> None:
         for d in self.directions:
@@ -101,6 +102,10 @@ class RetreatConfig:
     settle_speed: float = 0.001  # m/s, every hose vertex slower than this
     settle_max_time: float = 6.0  # s of simulated time
     settle_check_every: float = 0.1  # s
+
+    def __post_init__(self) -> None:
+        if self.qpos is not None:  # from JSON: a list
+            self.qpos = tuple(float(q) for q in self.qpos)
 
     def joint_target(self, scene: Any = None) -> tuple[float, ...]:
         """The retreat joint configuration (see ``qpos``) for a scene config."""

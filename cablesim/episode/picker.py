@@ -8,7 +8,9 @@ centimetres of it (connected to it), and accepts the first candidate that
 - has at least ``min_pixels`` pixels with valid depth and is elongated (eccentricity),
 - is away from occlusions: no pixel of another hose or of the robot within ``clearance``
   of the segment,
-- lies on the hose in 3D (its depth-estimated centre within ``max_axis_error`` of the rod) and
+- lies on the hose in 3D (its depth-estimated centre within ``max_axis_error`` of the rod), at
+  least ``min_end_distance`` along the hose from either end (near a connector the hose is
+  short and taut: pulling it along its axis makes it slip through the fingers), and
   its axis is at most ``max_out_of_plane_deg`` out of the image plane (SPEC 5),
 - is graspable: the grasp and pre-grasp poses and the action end points
   (g1 +- D for every configured direction) pass ``robot.check_reachable``.
@@ -63,11 +65,12 @@ def pick_segment(
     rng: np.random.Generator,
     config: EpisodeConfig | None = None,
     half_length: float = 0.03,
-    clearance: float = 0.02,
+    clearance: float = 0.01,
     min_pixels: int = 10,
     min_eccentricity: float = 0.8,
     max_axis_error: float = 0.02,
     max_out_of_plane_deg: float = 30.0,
+    min_end_distance: float = 0.2,
     max_tries: int = 40,
 ) -> PickedSegment:
     """A random graspable visible segment of ``hose`` in the camera's current image."""
@@ -84,6 +87,7 @@ def pick_segment(
     if len(vv) == 0:
         raise UnreachableError(f"hose {hose} is not visible in the image")
     verts = world.hose_vertices(hose)
+    lengths = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(verts, axis=0), axis=1))])
     approach = np.asarray(prim.DEFAULT_APPROACH)
     reasons: Counter[str] = Counter()
     order = rng.permutation(len(vv))[:max_tries]
@@ -113,7 +117,10 @@ def pick_segment(
             continue
         centre = T[:3, :3] @ sp.centre + T[:3, 3]
         axis = T[:3, :3] @ sp.axis
-        d = _distance_to_polyline(centre, verts)
+        d, arc = _distance_to_polyline(centre, verts)
+        if arc < min_end_distance or arc > lengths[-1] - min_end_distance:
+            reasons["too close to a hose end"] += 1
+            continue
         if d > max_axis_error:
             reasons["off the hose in 3D"] += 1
             continue
@@ -138,8 +145,12 @@ def pick_segment(
     )
 
 
-def _distance_to_polyline(p: np.ndarray, verts: np.ndarray) -> float:
+def _distance_to_polyline(p: np.ndarray, verts: np.ndarray) -> tuple[float, float]:
+    """Distance of ``p`` to the polyline and the arc length of its nearest point."""
     a, b = verts[:-1], verts[1:]
     ab = b - a
     t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.maximum((ab * ab).sum(1), 1e-18), 0, 1)
-    return float(np.linalg.norm(a + t[:, None] * ab - p, axis=1).min())
+    d = np.linalg.norm(a + t[:, None] * ab - p, axis=1)
+    e = int(np.argmin(d))
+    seg = np.linalg.norm(ab, axis=1)
+    return float(d[e]), float(seg[:e].sum() + t[e] * seg[e])

@@ -272,11 +272,23 @@ def run_episode(
         with SimTrigger(world, collector.on_frame, cfg.capture.frame_rate):
             if cfg.kind == "grasp":
                 r = prim.periodic_action(
-                    robot, g.pose, u, cfg.actions.amplitude, cfg.actions.periods, cfg.actions.speed
+                    robot,
+                    g.pose,
+                    u,
+                    cfg.actions.amplitude,
+                    cfg.actions.periods,
+                    cfg.actions.speed,
+                    cfg.actions.stroke_tolerance,
                 )
             else:
                 r = prim.push(
-                    robot, g.pose, u, cfg.push_depth, cfg.actions.periods, cfg.actions.speed
+                    robot,
+                    g.pose,
+                    u,
+                    cfg.push_depth,
+                    cfg.actions.periods,
+                    cfg.actions.speed,
+                    cfg.actions.stroke_tolerance,
                 )
         collector.end_action()
         kept = len([f for f in collector.frames if f.action == a])
@@ -285,6 +297,8 @@ def run_episode(
             label, u, len(log.times.get(a, [])), kept, gain, r2, log.hose_displacement(a)
         )
         result.actions.append(rep)
+        if r.details.get("short_strokes"):
+            result.details[f"action{a}_short_strokes_m"] = r.details["short_strokes"]
         say(f"action {a} ({label}): {kept}/{rep.ticks} frames kept, gain {gain:.3f}")
         if not r:
             return _abort(result, robot, world, cfg, f"action {a} ({label}): {r.reason}", say)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from cablesim.camera.base import CameraImage
 from cablesim.episode.config import EpisodeConfig
 from cablesim.episode.picker import PickedSegment, pick_segment
 from cablesim.episode.recording import RecordingWriter
@@ -28,6 +29,7 @@ class SimulatedEpisode:
     robot: Any
     camera: Any
     build_time: float
+    start_image: CameraImage  # the image the start segment was picked in
 
     def close(self) -> None:
         self.camera.close()
@@ -57,6 +59,7 @@ def simulate_episode(
     say(f"[episode] scene seed {cfg.seed} built in {build:.1f} s")
     rng = rng_streams(cfg.seed)["episode"]
     hose = cfg.hose if cfg.hose is not None else int(rng.integers(len(world.hoses)))
+    start_image = camera.capture()
     segment = pick_segment(world, robot, camera, hose, rng, cfg)
     say(
         f"[episode] start segment: hose {hose}, {int(segment.mask.sum())} px at "
@@ -73,4 +76,4 @@ def simulate_episode(
             final = dict(result.stream.meta) if result.stream is not None else {}
             final.update(meta, result=result.to_dict())
             writer.close(final, complete=result.success)
-    return SimulatedEpisode(result, segment, world, robot, camera, build)
+    return SimulatedEpisode(result, segment, world, robot, camera, build, start_image)

@@ -1,0 +1,121 @@
+"""Run one seeded interaction: build the scene, pick a random graspable start segment of a hose
+(the stand-in for a person clicking on it), grasp, two periodic actions (along and across the
+hose), release, retreat out of view, settle, target frame.
+
+Files in --out:
+  recording/         the frame stream (see cablesim.episode.recording; replay with
+                     cablesim.camera.replay.ReplayCamera)
+  contact_sheet.png  start image with the segment, a few action frames, the target frame and
+                     its ground-truth grasped-hose mask
+  start.png, target.png, target_labels.png
+  summary.json       config, result (gain per action, other hoses' displacement, frames kept,
+                     timings); also printed
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from cablesim.episode.config import EpisodeConfig
+from cablesim.perception.frames import LABEL_ROBOT, Stream
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seed", type=int, default=0, help="episode and scene seed (default 0)")
+    p.add_argument("--hose", type=int, default=None, help="hose to grasp (default: drawn)")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--hoses", type=int, default=None, help="number of hoses (default 4)")
+    p.add_argument("--width", type=int, default=None, help="image width (default 640)")
+    p.add_argument("--height", type=int, default=None, help="image height (default 480)")
+    p.add_argument("--periods", type=int, default=None, help="periods per action (K_p, 3)")
+    p.add_argument("--push", action="store_true", help="push (poke) instead of grasping")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing recording")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def config_from_args(args: argparse.Namespace) -> EpisodeConfig:
+    cfg = EpisodeConfig(seed=args.seed, hose=args.hose, progress=not args.quiet)
+    scene = cfg.scene
+    if args.hoses is not None:
+        scene.hoses.count = args.hoses
+    if args.width is not None:
+        scene.camera.width = args.width
+    if args.height is not None:
+        scene.camera.height = args.height
+    if args.periods is not None:
+        cfg.actions.periods = args.periods
+    if args.push:
+        cfg.kind = "push"
+    return cfg.validate()
+
+
+def _bgr(rgb: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(rgb[..., ::-1])
+
+
+def contact_sheet(
+    start_rgb: np.ndarray, segment: np.ndarray, stream: Stream, n_action_frames: int = 4
+) -> np.ndarray:
+    """One row: start image (segment in magenta), a few action frames, target, target mask."""
+    start = start_rgb.copy()
+    start[segment] = (255, 0, 255)
+    frames = [f for f in stream.frames if not f.is_target]
+    pick = np.linspace(0, len(frames) - 1, min(n_action_frames, len(frames))).round().astype(int)
+    tiles = [start] + [frames[i].rgb for i in pick] + [stream.target.rgb]
+    truth = stream.target.truth
+    if truth is not None and truth.grasped_hose is not None:
+        mask = np.zeros_like(start)
+        mask[truth.labels == truth.grasped_hose] = (255, 255, 255)
+        mask[truth.labels == LABEL_ROBOT] = (255, 0, 0)
+        tiles.append(mask)
+    h = tiles[0].shape[0]
+    sep = np.full((h, 4, 3), 255, np.uint8)
+    row: list[np.ndarray] = []
+    for t in tiles:
+        row += [t, sep]
+    return np.concatenate(row[:-1], axis=1)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cablesim.episode.simulate import simulate_episode
+
+    cfg = config_from_args(args)
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    if cfg.progress:
+        print(f"[episode] config:\n{cfg}")
+    ep = simulate_episode(cfg, record_to=out / "recording", overwrite=args.overwrite)
+    try:
+        res = ep.result
+        summary = {
+            "config": cfg.to_dict(),
+            "segment_px": int(ep.segment.mask.sum()),
+            "scene_build_s": ep.build_time,
+            "result": res.to_dict(),
+        }
+        if res.success and res.stream is not None:
+            start_img = ep.start_image.rgb
+            sheet = contact_sheet(start_img, ep.segment.mask, res.stream)
+            cv2.imwrite(str(out / "contact_sheet.png"), _bgr(sheet))
+            cv2.imwrite(str(out / "start.png"), _bgr(start_img))
+            cv2.imwrite(str(out / "target.png"), _bgr(res.stream.target.rgb))
+            t = res.stream.target.truth
+            if t is not None:
+                lab = np.where(t.labels >= 0, 60 + 40 * t.labels, 0)
+                lab[t.labels == LABEL_ROBOT] = 255
+                cv2.imwrite(str(out / "target_labels.png"), lab.astype(np.uint8))
+            kept = len(res.stream) - 1
+            summary["frames_kept"] = kept
+            summary["gain"] = {a.label: a.gain for a in res.actions}
+            summary["other_hoses_max_displacement_m"] = res.other_hose_displacement()
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        print(res.summary())
+        print(f"[episode] wrote {out}")
+        return 0 if res.success else 1
+    finally:
+        ep.close()
