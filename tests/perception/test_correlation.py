@@ -103,6 +103,8 @@ def _batch(rs, dgs, tau_n, scale):
     w, v = np.linalg.eigh(cov)
     psi = v[:, 1]
     dphi = s @ psi
+    if g.std() <= 1e-3 or dphi.std() <= 1e-5:  # degenerate: no fit (checked by the caller)
+        return psi, 0.0, 0.0, dphi.std(), w, g
     c0, c1 = np.polyfit(g, dphi, 1)
     pred = c0 * g + c1
     r2 = 1 - np.sum((dphi - pred) ** 2) / np.sum((dphi - dphi.mean()) ** 2)
@@ -121,30 +123,39 @@ vec = st.tuples(st.floats(-20, 20), st.floats(-20, 20))
 )
 def test_one_pass_moments_match_batch(samples, dtype):
     tau_n = 0.67
-    rs = [s[0] for s in samples]
-    dgs = [s[1] for s in samples]
-    zs = [s[2] for s in samples]
     focal = 500.0
-    used = np.linalg.norm(np.asarray(rs), axis=1) > tau_n
+    ref = np.full((2, 3, 2), 0.25, np.float32)
+    flows = [ref + np.asarray(smp[0], np.float32) for smp in samples]
+    # the relative flow the accumulator sees (flows are float32)
+    rs = [f[0, 0].astype(np.float64) - ref[0, 0].astype(np.float64) for f in flows]
+    dgs = [smp[1] for smp in samples]
+    zs = [smp[2] for smp in samples]
+    mags = np.linalg.norm(np.asarray(rs), axis=1)
+    assume(np.all(np.abs(mags - tau_n) > 1e-4))  # float32 may round across the threshold
+    used = mags > tau_n
     assume(used.sum() >= 3)
     psi, c0, r2, std, w, g = _batch(rs, dgs, tau_n, np.asarray(zs) / focal)
     # well-posed cases only: distinct eigenvalues, spread in d_g and d_phi
     assume(w[1] > 1.2 * w[0] + 1e-9 and g.std() > 1e-3 and std > 1e-5)
+    if dtype == np.float32:
+        # float32 running sums lose the covariance to cancellation when it is tiny compared
+        # with the squared mean: compare only well-conditioned moments
+        s = np.asarray(rs)[used] * (np.asarray(zs)[used, None] / focal)
+        assume(w[1] - w[0] > 1e-3 * (np.sum(s.mean(0) ** 2) + w[1]))
+        assume(g.var() > 1e-3 * (g.mean() ** 2 + g.var()))
     acc = CorrelationAccumulator((2, 3), focal, CorrelationParams(tau_n=tau_n), dtype=dtype)
-    ref = np.full((2, 3, 2), 0.25, np.float32)
     acc.update(ref, 0.0, 1.0)
-    for r, d, z in zip(rs, dgs, zs, strict=True):
-        flow = ref + np.asarray(r, np.float32)
-        acc.update(flow, d, z)
+    for f, d, z in zip(flows, dgs, zs, strict=True):
+        acc.update(f, d, z)
     res = acc.result()
-    tol = 1e-6 if dtype == np.float64 else 2e-3
+    tol = 1e-5 if dtype == np.float64 else 2e-2
     for y in range(2):
         for x in range(3):
-            assert abs(abs(float(np.dot(res.psi[y, x], psi))) - 1) < max(tol, 1e-5)
-            assert abs(abs(res.c0[y, x]) - abs(c0)) <= tol * (1 + abs(c0)) * 10
-            assert abs(res.r2[y, x] - r2) <= tol * 10
-            assert abs(res.std_dphi[y, x] - std) <= tol * (std + 1e-4) * 10
             assert res.n[y, x] == used.sum()
+            assert abs(abs(float(np.dot(res.psi[y, x], psi))) - 1) < tol
+            assert abs(abs(res.c0[y, x]) - abs(c0)) <= tol * (1 + abs(c0))
+            assert abs(res.r2[y, x] - r2) <= tol
+            assert abs(res.std_dphi[y, x] - std) <= tol * (std + 1e-4)
 
 
 def test_memory_independent_of_length():
