@@ -114,7 +114,9 @@ class FrameTruth:
 
     labels: np.ndarray  # HxW int16
     grasped_hose: int | None = None
-    flow_to_target: np.ndarray | None = None  # HxWx2 float32, in this frame's pixels
+    # HxWx2 float32 in *target-frame* pixels p: target pixel p shows the surface point that was
+    # at p + flow in this frame (SPEC section 4's phi; computed from the target to this frame)
+    flow_to_target: np.ndarray | None = None
     flow_valid: np.ndarray | None = None  # HxW bool
     extra: dict[str, Any] = field(default_factory=dict)
 

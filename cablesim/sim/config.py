@@ -150,10 +150,15 @@ class RobotConfig:
     enabled: bool = True
     base_position: tuple[float, float, float] = (0.22, -0.62, 0.0)
     base_yaw: float = 1.1  # radians about z; 0 faces +x
+    # where the arm waits: away from the hoses and out of the default camera's view (the scene
+    # starts and settles with the arm here; ``SimPanda`` retreats here before a target frame)
+    park_qpos: tuple[float, ...] = (-2.0, -0.5, 0.0, -2.8, 0.0, 2.3, 0.78)
 
     def validate(self) -> None:
         if len(self.base_position) != 3:
             raise ConfigError("robot.base_position", "expected (x, y, z)")
+        if len(self.park_qpos) != 7:
+            raise ConfigError("robot.park_qpos", f"expected 7 joint angles, got {self.park_qpos}")
 
 
 @dataclass

@@ -74,10 +74,13 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
         floor = h.radius + 0.004 + 2.6 * h.radius * rank
         if want_both:
             pa = attach_point(cfg, a)
+            # side by side (a hose cannot hang as a loop between two connectors one above the
+            # other) and with some slack
             ok = [
                 c
                 for c in free
-                if 0.12 < np.linalg.norm(attach_point(cfg, c) - pa) < 0.8 * lengths[i]
+                if abs(attach_point(cfg, c)[1] - pa[1]) >= 0.12
+                and np.linalg.norm(attach_point(cfg, c) - pa) < 0.8 * lengths[i]
             ]
             # a hose attached at both ends must hang clear of the table
             ok = [
@@ -128,24 +131,67 @@ def _arc_length(points: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
 
 
+def _smooth_ramp(u: np.ndarray) -> np.ndarray:
+    u = np.clip(u, 0, 1)
+    return u * u * (3 - 2 * u)
+
+
+def _equalise_chords(pts: np.ndarray, chord: float, iterations: int = 300) -> np.ndarray:
+    """Nudge a chain towards equal edge lengths, both ends fixed (position-based projection)."""
+    p = pts.copy()
+    for _ in range(iterations):
+        d = np.diff(p, axis=0)
+        length = np.linalg.norm(d, axis=1, keepdims=True)
+        corr = 0.5 * (1 - chord / np.maximum(length, 1e-12)) * d
+        p[:-1] += corr
+        p[1:] -= corr
+        p[0], p[-1] = pts[0], pts[-1]
+    return p
+
+
 def _hanging_curve(
     pa: np.ndarray, pb: np.ndarray, length: float, bulge: float, n: int = 400
 ) -> np.ndarray:
-    """A parabola from ``pa`` to ``pb``, bulging out by ``bulge``, as a chain of ``n`` points
-    equally spaced along it whose total length is ``length``."""
-    t = np.linspace(0, 1, 400)
+    """``n`` points from ``pa`` to ``pb`` (connectors side by side on the board) with chords of
+    (nearly) ``length / (n - 1)``, bulging out of the board by ``bulge`` (smoothly, within ~5 cm
+    of each end).  A hose much longer than the gap hangs as a U (two drops joined by a half
+    circle as wide as the gap), a shorter one as a parabola under the line between the ends."""
+    span = abs(pb[1] - pa[1])
+    drop = length - np.pi * span / 2 - abs(pa[2] - pb[2])
+    if drop > 0:
+        r = span / 2
+        bottom = min(pa[2], pb[2]) - drop / 2  # where the drops meet the half circle
+        side = np.sign(pb[1] - pa[1]) or 1.0
+        arc = np.linspace(np.pi, 2 * np.pi, 200)
+        ya = pa[1] + r * side
+        circle = np.stack(
+            [np.full_like(arc, pa[0]), ya + side * r * np.cos(arc), bottom + r * np.sin(arc)], 1
+        )
+        p = np.vstack(
+            [
+                np.linspace(pa, [pa[0], pa[1], bottom], 100)[:-1],
+                circle,
+                np.linspace([pb[0], pb[1], bottom], pb, 100)[1:],
+            ]
+        )
+    else:
+        t = np.linspace(0, 1, 1200)
 
-    def curve(sag: float) -> np.ndarray:
-        p = pa[None] * (1 - t[:, None]) + pb[None] * t[:, None]
-        p[:, 2] -= sag * 4 * t * (1 - t)
-        p[:, 0] -= bulge * np.minimum(1, np.minimum(t, 1 - t) / 0.08)  # out within ~5 cm
-        return _resample(p, n)
+        def sagging(sag: float) -> np.ndarray:
+            q = pa[None] * (1 - t[:, None]) + pb[None] * t[:, None]
+            q[:, 2] -= sag * 4 * t * (1 - t)
+            return q
 
-    lo, hi = 0.0, 10.0
-    for _ in range(60):  # bisection on the sag
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if _arc_length(curve(mid)) < length else (lo, mid)
-    return curve(0.5 * (lo + hi))
+        lo, hi = 0.0, 3.0
+        for _ in range(50):  # the sag at which the curve has the hose's length
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _arc_length(sagging(mid)) < length else (lo, mid)
+        p = sagging(0.5 * (lo + hi))
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    u = np.concatenate([[0], np.cumsum(seg)]) / seg.sum()
+    p = p.copy()
+    p[:, 0] -= bulge * _smooth_ramp(np.minimum(u, 1 - u) * seg.sum() / 0.05)
+    return _equalise_chords(_resample(p, n), length / (n - 1))
 
 
 def _lowest_point(pa: np.ndarray, pb: np.ndarray, length: float, bulge: float) -> float:
@@ -172,5 +218,7 @@ def start_shape(cfg: SceneConfig, spec: HoseSpec) -> np.ndarray:
     # cut the path at the hose's length
     cum = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
     end = np.array([np.interp(spec.length, cum, pts[:, k]) for k in range(3)])
-    pts = np.vstack([pts[cum < spec.length], end])
-    return _resample(pts, spec.n_vertices)
+    pts = _resample(np.vstack([pts[cum < spec.length], end]), spec.n_vertices)
+    pts = _equalise_chords(pts, spec.length / (spec.n_vertices - 1))
+    pts[:, 2] = np.maximum(pts[:, 2], spec.floor)  # the nudge may have dipped into the table
+    return pts

@@ -415,10 +415,18 @@ def joint_qpos_addresses(model: mujoco.MjModel, names: Sequence[str]) -> np.ndar
 
 def set_home(model: mujoco.MjModel, data: mujoco.MjData, names: PandaNames) -> None:
     """Put the arm at ``HOME_QPOS`` with fingers open and matching controls (no forward call)."""
-    data.qpos[joint_qpos_addresses(model, names.joints)] = HOME_QPOS
+    set_arm(model, data, names, HOME_QPOS)
+
+
+def set_arm(
+    model: mujoco.MjModel, data: mujoco.MjData, names: PandaNames, q: Sequence[float]
+) -> None:
+    """Put the arm at joint angles ``q`` (7,) with fingers open and matching controls."""
+    q = np.asarray(q, dtype=float)
+    data.qpos[joint_qpos_addresses(model, names.joints)] = q
     data.qpos[joint_qpos_addresses(model, names.finger_joints)] = FINGER_RANGE[1]
     for i, a in enumerate(names.actuators):
-        data.ctrl[model.actuator(a).id] = HOME_QPOS[i]
+        data.ctrl[model.actuator(a).id] = q[i]
     data.ctrl[model.actuator(names.gripper_actuator).id] = MAX_OPENING
 
 

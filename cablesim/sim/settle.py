@@ -74,6 +74,7 @@ def settle_world(world: World, progress: bool = False) -> float:
             warnings.warn(f"ignoring unreadable settle cache {path}: {e}", stacklevel=2)
     chunk = max(1, int(round(p.settle_check_every / world.model.opt.timestep)))
     speed = float("inf")
+    calm = 0  # consecutive checks below the threshold (one could be a passing minimum)
     while world.time < p.settle_max_time:
         world.step(chunk)
         speed = max_vertex_speed(world)
@@ -83,7 +84,8 @@ def settle_world(world: World, progress: bool = False) -> float:
                 end="",
                 flush=True,
             )
-        if speed < p.settle_speed:
+        calm = calm + 1 if speed < p.settle_speed else 0
+        if calm >= 3:
             break
     if progress:
         print()

@@ -50,6 +50,7 @@ class Hose:
     vert_adr: int  # first vertex in data.flexvert_xpos
     n_vertices: int
     vertex_bodies: np.ndarray  # body id of each vertex (0 = pinned to the world)
+    start_equality: int  # id of the connect equality holding the first end
     end_equality: int | None  # id of the connect equality holding the far end
 
 
@@ -99,28 +100,31 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
         mass = h.mass_per_metre * s.length
         # straight rod hanging from its first end: grid x axis -> world -z
         centre = top - np.array([0, 0, spacing * (s.n_vertices - 1) / 2])
-        pins = "0" if s.both_ends or True else ""
         flexes.append(f"""
     <flexcomp name="{s.name}" type="grid" count="{s.n_vertices} 1 1" spacing="{spacing:.9g} 1 1"
               pos="{_fmt(centre)}" quat="0.70710678 0 0.70710678 0" dim="1" dof="full"
               radius="{h.radius}" rgba="{_fmt(s.rgb)} 1" mass="{mass:.6g}">
       <edge equality="true" solimp="0.99 0.999 0.001" solref="0.004 1" damping="0"/>
       <elasticity young="{s.young:.6g}" poisson="{h.poisson}" damping="0.0005"/>
-      <contact condim="3" solref="0.004 1" solimp="0.95 0.99 0.001" friction="{h.friction} 0.005 0.0001"
-               selfcollide="none" margin="0.002"/>
-      <pin id="{pins}"/>
+      <contact condim="3" solref="0.01 1" solimp="0.95 0.99 0.001" friction="{h.friction} 0.005 0.0001"
+               selfcollide="none"/>
     </flexcomp>""")
+        # Ends are held by connect equalities rather than pinned: a pinned vertex cannot give
+        # way, and contacts on the edge next to it chatter (measured: 20-100 mm/s forever).
+        held = [(f"{s.name}_start", 0)]
         if s.both_ends:
+            held.append((f"{s.name}_far_end", s.n_vertices - 1))
+        for name, vertex in held:
             equalities.append(
-                f'<connect name="{s.name}_far_end" body1="{s.name}_{s.n_vertices - 1}" '
-                f'body2="world" anchor="0 0 0" solref="0.004 1" solimp="0.99 0.999 0.001"/>'
+                f'<connect name="{name}" body1="{s.name}_{vertex}" body2="world" anchor="0 0 0" '
+                f'solref="0.004 1" solimp="0.99 0.999 0.001"/>'
             )
     cam_xy = np.concatenate([R[:, 0], -R[:, 1]])
     return f"""
 <mujoco model="cablesim_task_board">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{cfg.physics.timestep}" integrator="discrete" gravity="0 0 {cfg.physics.gravity}"
-          cone="elliptic" impratio="2"/>
+          cone="elliptic" impratio="10"/>
   <size memory="64M"/>
   <visual>
     <global offwidth="{max(1280, cfg.camera.width)}" offheight="{max(720, cfg.camera.height)}"/>
@@ -129,7 +133,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     <headlight ambient="0.35 0.35 0.35" diffuse="0.35 0.35 0.35" specular="0.05 0.05 0.05"/>
   </visual>
   <default>
-    <geom solref="0.004 1"/>
+    <geom solref="0.01 1"/>
   </default>
   <asset>
     <mesh name="male" file="{assets.mesh_path("male")}"/>
@@ -235,7 +239,9 @@ class World:
                 if s.both_ends
                 else None
             )
-            hoses.append(Hose(s, fid, adr, num, model.flex_vertbodyid[adr : adr + num].copy(), eq))
+            start = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, f"{s.name}_start")
+            bodies = model.flex_vertbodyid[adr : adr + num].copy()
+            hoses.append(Hose(s, fid, adr, num, bodies, start, eq))
         _damp_hoses(model, hoses, cfg.hoses.damping)
         world = cls(cfg, spec, model, hoses, cam, panda, panda_base)
         world._set_start_shapes()
@@ -249,9 +255,9 @@ class World:
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         if self.panda is not None:
-            from cablesim.sim.panda import set_home
+            from cablesim.sim.panda import set_arm
 
-            set_home(m, d, self.panda)
+            set_arm(m, d, self.panda, self.cfg.robot.park_qpos)
         mujoco.mj_kinematics(m, d)
         for hose in self.hoses:
             target = start_shape(self.cfg, hose.spec)
@@ -266,8 +272,9 @@ class World:
                 sol = np.linalg.lstsq(axes, delta, rcond=None)[0]
                 for j in range(jnum):
                     d.qpos[m.jnt_qposadr[jadr + j]] += sol[j]
+            # connect: the anchor on the end vertex (body1) meets this world point (body2)
+            m.eq_data[hose.start_equality, 3:6] = target[0]
             if hose.end_equality is not None:
-                # connect: anchor on the far vertex (body1) meets this world point (body2)
                 m.eq_data[hose.end_equality, 3:6] = target[-1]
         mujoco.mj_forward(m, d)
 

@@ -83,7 +83,7 @@ def test_start_shapes_do_not_intersect() -> None:
                 d = np.linalg.norm(shapes[i][:, None] - shapes[j][None], axis=2)
                 # at most a shallow overlap (where one hose passes right in front of another's
                 # coupling) that contacts push apart; never one rod through another
-                assert d[1:-1, 1:-1].min() > 1.5 * cfg.hoses.radius, (seed, i, j)
+                assert d[1:-1, 1:-1].min() > 1.3 * cfg.hoses.radius, (seed, i, j)
 
 
 @pytest.fixture(scope="module")
@@ -126,9 +126,10 @@ def test_far_ends_stay_on_their_connectors(settled) -> None:
     world.step(100)
     for i, hose in enumerate(world.hoses):
         v = world.hose_vertices(i)
-        np.testing.assert_allclose(v[0], attach_point(world.cfg, hose.spec.ends[0]), atol=1e-6)
+        # both ends are held by connect equalities (soft constraints): within a millimetre
+        np.testing.assert_allclose(v[0], attach_point(world.cfg, hose.spec.ends[0]), atol=1e-3)
         if hose.spec.both_ends:
-            np.testing.assert_allclose(v[-1], attach_point(world.cfg, hose.spec.ends[1]), atol=2e-3)
+            np.testing.assert_allclose(v[-1], attach_point(world.cfg, hose.spec.ends[1]), atol=1e-3)
     world.reset()
 
 
