@@ -22,6 +22,7 @@ import cv2
 import numpy as np
 
 from cablesim.episode.config import EpisodeConfig
+from cablesim.errors import RecordingError
 from cablesim.perception.frames import LABEL_ROBOT, Stream
 
 
@@ -87,6 +88,9 @@ def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
+    rec = out / "recording"
+    if rec.exists() and any(rec.iterdir()) and not args.overwrite:
+        raise RecordingError(f"{rec} exists and is not empty (use --overwrite)")
     if cfg.progress:
         print(f"[episode] config:\n{cfg}")
     ep = simulate_episode(cfg, record_to=out / "recording", overwrite=args.overwrite)
