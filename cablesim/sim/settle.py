@@ -1,6 +1,7 @@
 """Settling: step until every hose vertex is slower than ``physics.settle_speed``.
 
-The settled state is cached per config (the physics-relevant parts and the library versions)
+The settled state is cached per config (the physics-relevant parts, the library versions and
+the code of the modules that build and settle the scene)
 in ``$CABLESIM_CACHE`` (default ``~/.cache/cablesim``) so that later builds of the same scene
 skip the settling; loading the cache gives the very state a fresh settle computes.
 """
