@@ -30,6 +30,18 @@ def cache_dir() -> Path:
     return Path(os.environ.get("CABLESIM_CACHE", Path.home() / ".cache" / "cablesim")) / "settled"
 
 
+# the modules whose code decides the settled state: a change to any of them makes a new key
+_PHYSICS_SOURCES = ("config.py", "layout.py", "world.py", "settle.py", "panda.py")
+
+
+def _source_digest() -> str:
+    here = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for name in _PHYSICS_SOURCES:
+        h.update((here / name).read_bytes())
+    return h.hexdigest()
+
+
 def cache_key(world: World) -> str:
     cfg = to_dict(world.cfg)
     cfg.pop("camera")  # the camera does not touch the physics
@@ -39,6 +51,7 @@ def cache_key(world: World) -> str:
             "cfg": cfg,
             "mujoco": mujoco.__version__,
             "cablesim": cablesim.__version__,
+            "code": _source_digest(),
             "nq": world.model.nq,
             "nv": world.model.nv,
         },
