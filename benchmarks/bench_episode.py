@@ -22,6 +22,8 @@ import sys
 import time
 from pathlib import Path
 
+from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
+
 import cablesim  # noqa: F401  (selects the headless GL back end)
 from cablesim.episode.config import EpisodeConfig
 from cablesim.episode.picker import pick_segment
@@ -29,16 +31,6 @@ from cablesim.episode.runner import run_episode
 from cablesim.sim.layout import rng_streams
 
 RESULTS = Path(__file__).parent / "results" / "episode.md"
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def main() -> int:

@@ -37,17 +37,9 @@ from cablesim.perception import (  # noqa: E402
 )
 
 H, W = 408, 552
+from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
+
 RESULTS = Path(__file__).resolve().parent / "results" / "perception.md"
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def texture(seed: int) -> np.ndarray:

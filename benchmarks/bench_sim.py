@@ -26,6 +26,7 @@ from pathlib import Path  # noqa: E402
 import cv2  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
+from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
 
 from cablesim.sim.camera import SimCamera  # noqa: E402
 from cablesim.sim.config import SceneConfig  # noqa: E402
@@ -33,16 +34,6 @@ from cablesim.sim.flow_gt import gt_flow  # noqa: E402
 from cablesim.sim.world import World  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "sim.md"
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def timed(fn, repeats: int) -> list[float]:
