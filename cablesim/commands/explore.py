@@ -1,0 +1,82 @@
+"""Explore one hose of a seeded scene: a start segment (the stand-in for a person clicking),
+then grasp, two periodic actions, motion correlation on the stream, and the grasp sampler's
+next reachable grasp on the same hose, up to a budget of grasps; the votes of all grasps are
+merged in the latest target frame and scored against ground truth.
+
+Files in --out: start.png, interaction{k}_votes.png (target | votes in green | ground truth |
+aimed segment), interaction{k}_flow.png (estimated | ground-truth flow), interaction{k}_maps.png
+(|c0| and R^2 per action), merged.png, episode.mp4 (or episode.gif), metrics.json (precision,
+recall, F_0.4, IoU per interaction and merged; the config).  The metrics are also printed.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from cablesim.policies.config import FLOWS, MERGES, STRATEGIES, ExploreConfig
+from cablesim.policies.perturb import PerturbConfig
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--seed", type=int, default=0, help="scene and exploration seed (default 0)")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--hose", type=int, default=None, help="hose of interest (default: drawn)")
+    p.add_argument("--grasps", type=int, default=3, help="budget of successful grasps (3)")
+    p.add_argument("--strategy", choices=STRATEGIES, default="sampler", help="next-grasp policy")
+    p.add_argument(
+        "--method",
+        choices=("correlation", "segmentation", "ablation"),
+        default=None,
+        help="segmentation method (default: correlation; segmentation for --strategy push)",
+    )
+    p.add_argument("--flow", choices=FLOWS, default="dis", help="optical flow back end (dis)")
+    p.add_argument("--raft-checkpoint", type=Path, default=None, help="weights for --flow raft")
+    p.add_argument("--merge", choices=MERGES, default="auto", help="vote carrying between targets")
+    p.add_argument("--perturb", action="store_true", help="disturb neighbouring hoses in actions")
+    p.add_argument("--hoses", type=int, default=None, help="number of hoses (default 4)")
+    p.add_argument("--width", type=int, default=None, help="image width (default 640)")
+    p.add_argument("--height", type=int, default=None, help="image height (default 480)")
+    p.add_argument("--periods", type=int, default=None, help="periods per action (K_p, 3)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def config_from_args(args: argparse.Namespace) -> ExploreConfig:
+    cfg = ExploreConfig(
+        seed=args.seed,
+        hose=args.hose,
+        grasps=args.grasps,
+        max_attempts=max(2 * args.grasps, args.grasps + 2),
+        strategy=args.strategy,
+        method=args.method,
+        flow=args.flow,
+        merge=args.merge,
+        width=args.width,
+        height=args.height,
+        perturb=PerturbConfig(enabled=bool(args.perturb)),
+        progress=not args.quiet,
+    )
+    if args.hoses is not None:
+        cfg.episode.scene.hoses.count = args.hoses
+    if args.periods is not None:
+        cfg.episode.actions.periods = args.periods
+    return cfg.validate()
+
+
+def run(args: argparse.Namespace) -> int:
+    from cablesim.policies.explore import explore
+
+    cfg = config_from_args(args)
+    flow_kwargs = None
+    if cfg.flow == "raft":
+        from cablesim.errors import InputError
+
+        if args.raft_checkpoint is None:
+            raise InputError("--flow raft needs --raft-checkpoint (no weights are downloaded)")
+        flow_kwargs = {"checkpoint": args.raft_checkpoint}
+    if cfg.progress:
+        print(f"[explore] config:\n{cfg}", flush=True)
+    res = explore(cfg, out=args.out, flow_kwargs=flow_kwargs)
+    print(res.summary())
+    print(f"[explore] wrote {args.out} (metrics.json, pictures, video)")
+    return 0 if res.successes else 1

@@ -1,0 +1,128 @@
+"""Typed, seeded, printable configuration of an exploration (several interactions on one hose).
+
+    cfg = ExploreConfig(seed=0, grasps=3, flow="dis")
+    print(cfg)                                   # JSON; ExploreConfig.from_dict(...) rebuilds it
+    cfg.episode_config()                         # the EpisodeConfig every interaction uses
+
+``seed`` is the one seed: it is the scene seed, draws the hose of interest (when ``hose`` is
+None) and the start segment from ``rng_streams(seed)["episode"]`` exactly as
+:func:`cablesim.episode.simulate.simulate_episode` does, and seeds the neighbour perturbation
+and the random-grasp baseline.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from cablesim.config import from_dict, pretty, to_dict
+from cablesim.episode.config import EpisodeConfig
+from cablesim.errors import ConfigError
+from cablesim.perception.correlation import CorrelationParams
+from cablesim.perception.grasp_sampler import GraspSamplerParams
+from cablesim.perception.segmentation import SegmentationParams
+
+from .perturb import PerturbConfig
+
+STRATEGIES = ("sampler", "random", "push")
+FLOWS = ("dis", "oracle", "farneback", "raft")
+MERGES = ("auto", "dis", "oracle", "none")
+
+
+@dataclass
+class ExploreConfig:
+    """An exploration: start segment, then up to ``grasps`` interactions on the same hose.
+
+    strategy: ``sampler`` (the thesis policy: grasp sampler on the merged votes),
+    ``random`` (baseline: next grasp at a random voted pixel), ``push`` (pokes instead of
+    grasps, next poke from the grasp sampler, motion segmentation by default).
+    method: ``correlation``, ``segmentation`` or ``ablation``; None = correlation for grasps,
+    segmentation for pushes.
+    merge: how votes of earlier interactions are carried into the latest target frame:
+    ``dis`` (DIS flow between the two target frames, ground-truth free), ``oracle``
+    (ground-truth flow between them), ``none`` (added in place), ``auto`` (oracle when
+    ``flow`` is oracle, else dis).
+    """
+
+    seed: int = 0
+    hose: int | None = None
+    strategy: str = "sampler"
+    grasps: int = 3  # successful interactions wanted
+    max_attempts: int = 6  # interactions tried in total (failed ones included)
+    method: str | None = None
+    flow: str = "dis"
+    merge: str = "auto"
+    merged_votes: int = 1  # a pixel is in the merged mask with at least this many votes
+    front_filter: bool = True  # keep the front-most part (depth) of a proposed segment
+    random_tries: int = 30  # random baseline: voted pixels tried per proposal
+    width: int | None = None  # image size; None = the scene's camera (640x480)
+    height: int | None = None
+    perturb: PerturbConfig = field(default_factory=PerturbConfig)
+    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    sampler: GraspSamplerParams = field(default_factory=GraspSamplerParams)
+    correlation: CorrelationParams = field(default_factory=CorrelationParams)
+    segmentation: SegmentationParams = field(default_factory=SegmentationParams)
+    progress: bool = True
+
+    @property
+    def kind(self) -> str:
+        return "push" if self.strategy == "push" else "grasp"
+
+    @property
+    def resolved_method(self) -> str:
+        if self.method is not None:
+            return self.method
+        return "segmentation" if self.kind == "push" else "correlation"
+
+    @property
+    def resolved_merge(self) -> str:
+        if self.merge != "auto":
+            return self.merge
+        return "oracle" if self.flow == "oracle" else "dis"
+
+    def episode_config(self) -> EpisodeConfig:
+        """The interaction config: the scene of ``seed`` at the chosen image size."""
+        ep = dataclasses.replace(self.episode, seed=self.seed, hose=self.hose, kind=self.kind)
+        scene = dataclasses.replace(ep.scene, seed=self.seed)
+        cam = dataclasses.replace(scene.camera)
+        if self.width is not None:
+            cam.width = self.width
+        if self.height is not None:
+            cam.height = self.height
+        scene = dataclasses.replace(scene, camera=cam)
+        return dataclasses.replace(ep, scene=scene, progress=False)
+
+    def validate(self) -> ExploreConfig:
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
+        if self.strategy not in STRATEGIES:
+            raise ConfigError("strategy", f"must be one of {STRATEGIES}, got {self.strategy!r}")
+        if self.method not in (None, "correlation", "segmentation", "ablation"):
+            raise ConfigError("method", f"unknown method {self.method!r}")
+        if self.flow not in FLOWS:
+            raise ConfigError("flow", f"must be one of {FLOWS}, got {self.flow!r}")
+        if self.merge not in MERGES:
+            raise ConfigError("merge", f"must be one of {MERGES}, got {self.merge!r}")
+        if not isinstance(self.grasps, int) or self.grasps < 1:
+            raise ConfigError("grasps", f"must be an integer >= 1, got {self.grasps!r}")
+        if self.max_attempts < self.grasps:
+            raise ConfigError("max_attempts", f"must be >= grasps ({self.grasps})")
+        if self.merged_votes < 1:
+            raise ConfigError("merged_votes", "must be >= 1")
+        self.perturb.validate()
+        self.episode_config().validate()
+        return self
+
+    def replace(self, **changes: Any) -> ExploreConfig:
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        return to_dict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> ExploreConfig:
+        return from_dict(cls, data)
+
+    def __str__(self) -> str:
+        return pretty(self)
