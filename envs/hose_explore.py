@@ -1,0 +1,334 @@
+"""``cablesim/HoseExplore-v0``: interactive perception of one hose as a Gymnasium environment.
+
+    import gymnasium as gym
+    import cablesim.envs  # registers the environment
+    env = gym.make("cablesim/HoseExplore-v0", config=HoseExploreConfig(width=160, height=120))
+    obs, info = env.reset(seed=0)
+    obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+
+Each episode: the scene ``config.scene_seed`` (fixed; ``randomize_scene=True`` uses the reset
+seed as scene seed instead) is reset to its settled state; the reset seed draws the hose of
+interest and a visible, graspable start segment of it (the stand-in for a person's click, given
+to the agent as ``obs["segment"]``).  Every step is one interaction with the hose.
+
+**Action** ``Dict``:
+
+- ``primitive``: ``Discrete(2)``: 0 = grasp and move periodically (two actions, along and across
+  the hose), 1 = push (poke) with the closed gripper;
+- ``point``: ``Box(0, 1, (2,), float32)``: where, in normalised image coordinates
+  (u / width, v / height) of the current image;
+- ``angle``: ``Box(-1, 1, (1,), float32)``: the hose's direction in the image at that point,
+  in units of pi/2 (``angle * pi/2`` radians from the image x axis, y down; -1 and 1 are the
+  same direction); the fingers close across it.
+
+The point and angle become a short line segment (``segment_length`` metres at the point's
+depth), from which the episode runner estimates the grasp centre and axis from depth (SPEC 3.1).
+
+**Observation** ``Dict`` (H x W = ``height`` x ``width``):
+
+- ``rgb``: uint8 (H, W, 3), the current image (the last target frame);
+- ``depth``: float32 (H, W), metres, 0 = invalid, clipped to [0, 10];
+- ``votes``: uint8 (H, W), merged votes for the hose of interest so far, in the current image
+  (each successful interaction adds up to one vote per action; earlier votes are carried into
+  the latest target frame as in :mod:`cablesim.policies.merge`);
+- ``segment``: uint8 (H, W), the start segment (1 on it), carried along like the votes;
+- ``gripper``: float32 (4,), TCP position in the camera frame (m) and finger opening (m).
+
+**Reward**: the gain in F_0.4 of the merged mask (``votes >= merged_votes``) of the hose of
+interest against ground truth, current image (so a failed or useless interaction gives 0 or a
+negative reward when the scene moved).  **Termination**: never; **truncation** after
+``budget`` interactions.  ``info``: ``hose``, ``success``, ``reason``, ``interactions``,
+``merged`` (precision, recall, f0.4, iou, pixels) and, after a successful interaction,
+``scores`` (its own mask in its own target frame).  ``info`` holds no timings, so a seeded
+episode reproduces it exactly.
+
+``render_mode="rgb_array"``: the current image with the merged votes in green and the start
+segment in magenta.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from cablesim.policies.perturb import PerturbConfig
+from gymnasium import spaces
+
+from cablesim.config import pretty, to_dict
+from cablesim.episode.config import EpisodeConfig
+from cablesim.errors import CablesimError
+
+PRIMITIVES = ("grasp", "push")
+
+
+@dataclass
+class HoseExploreConfig:
+    """Scene, image size, budget and perception of :class:`HoseExploreEnv`."""
+
+    scene_seed: int = 0
+    randomize_scene: bool = False  # True: the reset seed is the scene seed (slower resets)
+    hoses: int = 4
+    width: int = 160
+    height: int = 120
+    budget: int = 3  # interactions per episode
+    periods: int = 2  # K_p of each action (the thesis uses 3; 2 keeps steps short)
+    flow: str = "oracle"  # "oracle" | "dis" | "farneback"; small images favour the oracle
+    grasp_method: str = "correlation"
+    push_method: str = "segmentation"
+    merged_votes: int = 1
+    segment_length: float = 0.04  # m, the line segment made from (point, angle)
+    hose: int | None = None  # None: drawn from the reset seed
+    perturb: PerturbConfig = field(default_factory=PerturbConfig)
+    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+
+    def episode_config(self, seed: int) -> EpisodeConfig:
+        ep = dataclasses.replace(self.episode, seed=seed, progress=False)
+        scene = dataclasses.replace(ep.scene, seed=seed)
+        scene.hoses = dataclasses.replace(scene.hoses, count=self.hoses)
+        scene.camera = dataclasses.replace(scene.camera, width=self.width, height=self.height)
+        actions = dataclasses.replace(ep.actions, periods=self.periods)
+        return dataclasses.replace(ep, scene=scene, actions=actions).validate()
+
+    def __str__(self) -> str:
+        return pretty(self)
+
+
+class HoseExploreEnv(gym.Env):
+    """See the module docstring."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(
+        self, config: HoseExploreConfig | None = None, render_mode: str | None = None
+    ) -> None:
+        self.config = config or HoseExploreConfig()
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+        self.render_mode = render_mode
+        h, w = self.config.height, self.config.width
+        self.action_space = spaces.Dict(
+            {
+                "primitive": spaces.Discrete(2),
+                "point": spaces.Box(0.0, 1.0, (2,), np.float32),
+                "angle": spaces.Box(-1.0, 1.0, (1,), np.float32),
+            }
+        )
+        self.observation_space = spaces.Dict(
+            {
+                "rgb": spaces.Box(0, 255, (h, w, 3), np.uint8),
+                "depth": spaces.Box(0.0, 10.0, (h, w), np.float32),
+                "votes": spaces.Box(0, 255, (h, w), np.uint8),
+                "segment": spaces.Box(0, 1, (h, w), np.uint8),
+                "gripper": spaces.Box(-10.0, 10.0, (4,), np.float32),
+            }
+        )
+        self._world: Any = None
+        self._world_seed: int | None = None
+        self._camera: Any = None
+        self._pw: Any = None
+        self._robot: Any = None
+        self._merger: Any = None
+        self._segment: np.ndarray | None = None
+        self._image: Any = None
+        self._hose = 0
+        self._f = 0.0
+        self._count = 0
+        self._ep_cfg: EpisodeConfig | None = None
+        self._prev_snap: Any = None
+        self._dis: Any = None
+
+    # ------------------------------------------------------------------ set-up
+    def _ensure_world(self, scene_seed: int) -> None:
+        from cablesim.sim.world import World
+
+        if self._world is not None and self._world_seed == scene_seed:
+            return
+        if self._camera is not None:
+            self._camera.close()
+        self._ep_cfg = self.config.episode_config(scene_seed)
+        self._world = World.build(self._ep_cfg.scene_config())
+        self._world_seed = scene_seed
+        self._camera = None
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        from cablesim.policies.merge import VoteMerger
+        from cablesim.policies.perturb import PerturbedWorld
+
+        from cablesim.episode.picker import pick_segment
+        from cablesim.errors import UnreachableError
+        from cablesim.perception.flow import DISFlow
+        from cablesim.robot.sim_panda import SimPanda
+        from cablesim.sim.camera import SimCamera
+
+        super().reset(seed=seed)
+        cfg = self.config
+        episode_seed = int(self.np_random.integers(2**31 - 1))
+        scene_seed = episode_seed if cfg.randomize_scene else cfg.scene_seed
+        self._ensure_world(scene_seed)
+        world = self._world
+        world.reset()
+        rng = np.random.default_rng(episode_seed)
+        order = [cfg.hose] if cfg.hose is not None else list(rng.permutation(len(world.hoses)))
+        self._pw = PerturbedWorld(world, cfg.perturb, seed=episode_seed)
+        self._robot = SimPanda(self._pw)  # fresh: no IK warm start carried between episodes
+        if self._camera is None:
+            self._camera = SimCamera(self._pw)
+        else:
+            self._camera.world = self._pw
+        picked, reasons = None, []
+        for hose in order:
+            try:
+                picked = pick_segment(
+                    self._pw, self._robot, self._camera, int(hose), rng, self._ep_cfg
+                )
+                break
+            except UnreachableError as e:
+                reasons.append(str(e))
+        if picked is None:
+            raise CablesimError("no hose has a graspable start segment: " + "; ".join(reasons))
+        self._hose = picked.hose
+        self._pw.set_hose_of_interest(self._hose)
+        self._segment = picked.mask.astype(np.int16)
+        self._merger = VoteMerger(None)  # flows are passed explicitly
+        self._prev_snap = self._camera.snapshot() if cfg.flow == "oracle" else None
+        self._dis = DISFlow()
+        self._count = 0
+        self._image = self._camera.capture()
+        self._f = 0.0
+        info = {"hose": self._hose, "interactions": 0, "merged": self._merged_scores()}
+        return self._obs(), info
+
+    # ------------------------------------------------------------------ step
+    def step(
+        self, action: dict[str, Any]
+    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        from cablesim.policies.explore import scores_dict
+        from cablesim.policies.merge import warp_votes
+
+        from cablesim.episode.runner import run_episode
+        from cablesim.perception.pipeline import segment_stream
+
+        if self._pw is None:
+            raise CablesimError("call reset() before step()")
+        cfg = self.config
+        primitive = PRIMITIVES[int(action["primitive"])]
+        segment = self._line_segment(action)
+        info: dict[str, Any] = {"hose": self._hose, "primitive": primitive}
+        ep_cfg = self._ep_cfg.replace(kind=primitive, hose=self._hose)  # type: ignore[union-attr]
+        if segment is None:
+            ok, reason, stream = False, "no valid depth at the point", None
+        else:
+            r = run_episode(self._pw, self._robot, self._camera, segment, ep_cfg)
+            ok, reason, stream = r.success, r.reason, r.stream
+        self._count += 1
+        scores: dict[str, float] | None = None
+        now = self._camera.capture()
+        flow = self._flow_to_previous(now.rgb)
+        if flow is not None:
+            self._segment = warp_votes(self._segment, flow)
+        if ok and stream is not None:
+            method = cfg.grasp_method if primitive == "grasp" else cfg.push_method
+            seg = segment_stream(stream, method=method, flow=cfg.flow, pipelined=False)
+            self._merger.add(now.rgb, seg.votes, flow)
+            truth = stream.target.truth.labels == self._hose
+            scores = scores_dict(seg.mask(1), truth)
+        else:
+            self._merger.retarget(now.rgb, flow)
+        self._image = now
+        merged = self._merged_scores()
+        reward = float(merged["f0.4"] - self._f)
+        self._f = float(merged["f0.4"])
+        info.update(success=bool(ok), reason=reason, interactions=self._count, merged=merged)
+        if scores is not None:
+            info["scores"] = scores
+        truncated = self._count >= cfg.budget
+        return self._obs(), reward, False, truncated, info
+
+    # ------------------------------------------------------------------ helpers
+    def _line_segment(self, action: dict[str, Any]) -> np.ndarray | None:
+        import cv2
+
+        h, w = self.config.height, self.config.width
+        pt = np.clip(np.asarray(action["point"], np.float64).reshape(2), 0.0, 1.0)
+        u = min(int(pt[0] * w), w - 1)
+        v = min(int(pt[1] * h), h - 1)
+        depth = self._image.depth
+        z = depth[max(v - 2, 0) : v + 3, max(u - 2, 0) : u + 3]
+        z = z[(z > 0) & np.isfinite(z)]
+        if z.size == 0:
+            return None
+        half = 0.5 * self.config.segment_length * self._image.intrinsics.f / float(np.median(z))
+        half = max(half, 3.0)
+        a = float(np.asarray(action["angle"]).reshape(-1)[0]) * math.pi / 2
+        du, dv = half * math.cos(a), half * math.sin(a)
+        mask = np.zeros((h, w), np.uint8)
+        p0 = (int(round(u - du)), int(round(v - dv)))
+        p1 = (int(round(u + du)), int(round(v + dv)))
+        cv2.line(mask, p0, p1, 1, thickness=2)
+        mask = mask.astype(bool) & (depth > 0)
+        return mask if mask.sum() >= 5 else None
+
+    def _flow_to_previous(self, new_rgb: np.ndarray) -> np.ndarray | None:
+        """Flow from the new image to the previous one (new(p) = previous(p + f)): the
+        simulator's exact flow in the oracle configuration, else DIS (ground-truth free)."""
+        if self.config.flow != "oracle":
+            return self._dis.compute(new_rgb, self._image.rgb)
+        from cablesim.sim.flow_gt import gt_flow
+
+        snap = self._camera.snapshot()
+        prev, self._prev_snap = self._prev_snap, snap
+        if prev is None:
+            return None
+        flow, valid = gt_flow(snap, prev)[:2]
+        return np.where(valid[..., None], flow, 0.0).astype(np.float32)
+
+    def _merged_scores(self) -> dict[str, float]:
+        from cablesim.policies.explore import scores_dict
+
+        truth = self._camera.render_labels() == self._hose
+        if self._merger is None or self._merger.votes is None:
+            return scores_dict(np.zeros_like(truth), truth)
+        return scores_dict(self._merger.mask(self.config.merged_votes), truth)
+
+    def _obs(self) -> dict[str, np.ndarray]:
+        img = self._image
+        depth = np.clip(np.nan_to_num(img.depth, nan=0.0), 0.0, 10.0).astype(np.float32)
+        votes = self._merger.votes if self._merger.votes is not None else None
+        h, w = depth.shape
+        v = np.zeros((h, w), np.uint8) if votes is None else np.clip(votes, 0, 255).astype(np.uint8)
+        T = np.asarray(self._camera.T_world_camera, float)
+        pos = self._robot.ee_pose().position
+        pos_cam = (pos - T[:3, 3]) @ T[:3, :3]
+        grip = np.array([*pos_cam, self._robot.gripper_opening], np.float32)
+        return {
+            "rgb": img.rgb.copy(),
+            "depth": depth,
+            "votes": v,
+            "segment": (self._segment > 0).astype(np.uint8),
+            "gripper": np.clip(grip, -10.0, 10.0),
+        }
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array" or self._image is None:
+            return None
+        from cablesim.policies.report import overlay_votes
+
+        votes = self._merger.votes if self._merger.votes is not None else None
+        img = self._image.rgb if votes is None else overlay_votes(self._image.rgb, votes)
+        img = img.copy()
+        img[self._segment > 0] = (255, 0, 255)
+        return img
+
+    def close(self) -> None:
+        if self._camera is not None:
+            self._camera.close()
+            self._camera = None
+
+    def config_dict(self) -> dict[str, Any]:
+        return to_dict(self.config)
