@@ -1,0 +1,502 @@
+"""The real Panda through franky-control (``pip install 'cablesim[real]'``).
+
+:class:`FrankyPanda` implements the same :class:`~cablesim.robot.base.Robot` interface as the
+simulated :class:`~cablesim.robot.sim_panda.SimPanda`, so the episode code drives either.
+
+Frames.  Poses given to and returned by the interface are TCP poses in the *world* frame (the
+frame of the camera extrinsics ``T_world_camera``).  The robot works in its *base* frame ``O``;
+``T_world_base`` places it in the world.  The TCP is the Franka Hand's: 0.1034 m along the
+flange z axis, turned -45 degrees about it (:data:`FLANGE_T_TCP`), the same point as the
+simulated model's ``grasp_site``.  At connection the adapter sets ``NE_T_EE`` (``Robot.set_ee``)
+so that the robot's end-effector frame ``EE`` *is* this TCP whatever end effector Desk has
+configured (``F_T_EE = F_T_NE * NE_T_EE = FLANGE_T_TCP``); ``O_T_EE`` is then the TCP pose in
+the base frame and Cartesian motions move the TCP along straight lines.
+
+Motions.  Before anything is sent, a Cartesian target is checked on the arm-only
+:class:`~cablesim.robot.ik.ArmModel` (the same kinematics, joint limits and static obstacles as
+the simulated robot): IK along the straight line, every waypoint within limits and free of
+collisions.  A target that fails this check returns ``MoveResult(False, reason)`` without
+moving.  A motion the robot aborts (franky's ``ControlException`` carrying a reflex, e.g. a
+collision or a joint limit; ``CommandException``; ``InvalidOperationException``) also returns
+``MoveResult(False, reason)``, after ``recover_from_errors()``.  Only a lost connection
+(``NetworkException``) raises.
+
+Speeds.  franky scales its velocity, acceleration and jerk limits by a relative dynamics
+factor.  ``move_to``'s ``speed`` and ``angular_speed`` become the velocity factor
+``min(speed / v_max, angular_speed / w_max)`` (so both peaks stay within the requested
+values); acceleration and jerk use ``dynamics_factor``.  ``move_joints``' ``speed_factor`` is
+the velocity factor directly.
+
+Testing without hardware: :func:`franka_sim_mjcf` writes the arm model for the ``franka-sim``
+server (see ``tests/robot/test_franky_panda.py`` and the README's "Real robot" section).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import mujoco
+import numpy as np
+
+from cablesim.robot.base import Frame, MoveResult, Robot
+from cablesim.robot.ik import ArmModel, IKResult, Obstacle
+from cablesim.robot.pose import Pose
+from cablesim.sim.panda import HAND_OFFSET, HOME_QPOS, JOINT_LIMITS, MAX_OPENING, TCP_OFFSET
+
+if TYPE_CHECKING:  # pragma: no cover
+    import franky
+
+#: A configuration with the hand pointing along +x, elbow up (the simulated robot's IK seed).
+FORWARD_QPOS = np.array([0.0, -0.6, 0.0, -2.3, 0.0, np.pi / 2 + 1.7, np.pi / 4])
+
+
+def _flange_t_tcp() -> np.ndarray:
+    c, s = math.cos(-math.pi / 4), math.sin(-math.pi / 4)
+    T = np.eye(4)
+    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    T[2, 3] = TCP_OFFSET
+    return T
+
+
+#: The Franka Hand's TCP (between the finger pads) in the flange frame: what Desk sets as
+#: ``F_T_NE`` when the hand is configured, and the simulated model's ``grasp_site``.
+FLANGE_T_TCP: np.ndarray = _flange_t_tcp()
+
+
+def _import_franky() -> Any:
+    try:
+        import franky
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "FrankyPanda needs franky-control; install the 'real' extra: "
+            "pip install 'cablesim[real]' (franky-control==2.0.0)"
+        ) from exc
+    return franky
+
+
+def _column_major(T: np.ndarray) -> list[float]:
+    return [float(v) for v in np.asarray(T, dtype=float).T.reshape(16)]
+
+
+class FrankyPanda(Robot):
+    """The :class:`Robot` interface on a real Panda (or FR3) through franky-control.
+
+    ``host``: the robot's FCI address.  ``T_world_camera``: camera extrinsics (4x4, OpenCV
+    camera frame).  ``T_world_base``: the robot base in the world (4x4).  ``dynamics_factor``
+    (0, 1]: acceleration and jerk scaling of every motion and the cap on its velocity scaling.
+    ``obstacles``: static obstacles in world coordinates for the reachability check.
+    ``realtime``: demand a realtime kernel (libfranka's ``RealtimeConfig.Enforce``); switch off
+    only for a simulated robot.  ``collision_thresholds``: (torque Nm, force N) reflex
+    thresholds, or None for franky's defaults.  ``robot``/``gripper``: already-connected franky
+    objects (otherwise connected to ``host``); ``gripper=False`` runs without a hand.
+    """
+
+    def __init__(
+        self,
+        host: str,
+        T_world_camera: np.ndarray,
+        T_world_base: np.ndarray | None = None,
+        dynamics_factor: float = 0.2,
+        obstacles: Sequence[Obstacle] = (),
+        *,
+        realtime: bool = True,
+        collision_thresholds: tuple[float, float] | None = None,
+        position_tolerance: float = 0.003,
+        rotation_tolerance: float = 0.05,
+        joint_tolerance: float = 0.01,
+        waypoint_spacing: float = 0.01,
+        max_joint_jump: float = 0.25,
+        motion_timeout: float = 30.0,
+        settle_time: float = 0.5,
+        flange_T_tcp: np.ndarray = FLANGE_T_TCP,
+        robot: Any = None,
+        gripper: Any = None,
+    ):
+        if not 0.0 < dynamics_factor <= 1.0:
+            raise ValueError(f"dynamics_factor must be in (0, 1], got {dynamics_factor}")
+        self._franky = _import_franky()
+        fr = self._franky
+        self.host = host
+        self.T_world_camera = np.asarray(T_world_camera, dtype=float).reshape(4, 4)
+        self.T_world_base = (
+            np.eye(4) if T_world_base is None else np.asarray(T_world_base, dtype=float)
+        ).reshape(4, 4)
+        self._T_base_world = np.linalg.inv(self.T_world_base)
+        self.dynamics_factor = float(dynamics_factor)
+        self.position_tolerance = position_tolerance
+        self.rotation_tolerance = rotation_tolerance
+        self.joint_tolerance = joint_tolerance
+        self.waypoint_spacing = waypoint_spacing
+        self.max_joint_jump = max_joint_jump
+        self.motion_timeout = motion_timeout
+        self.settle_time = settle_time
+        self.flange_T_tcp = np.asarray(flange_T_tcp, dtype=float).reshape(4, 4)
+
+        base = Pose.from_matrix(self.T_world_base)
+        self.arm = ArmModel(base.position, base.quaternion, obstacles)
+
+        if robot is None:
+            config = fr.RealtimeConfig.Enforce if realtime else fr.RealtimeConfig.Ignore
+            robot = fr.Robot(host, realtime_config=config)
+        self.robot: franky.Robot = robot
+        self.robot.relative_dynamics_factor = 1.0  # per-motion factors carry the scaling
+        if collision_thresholds is not None:
+            self.robot.set_collision_behavior(*collision_thresholds)
+        self._set_tcp()
+        self._v_max = float(self.robot.translation_velocity_limit.get())
+        self._w_max = float(self.robot.rotation_velocity_limit.get())
+        if gripper is None:
+            gripper = fr.Gripper(host)
+        self.gripper: franky.Gripper | None = gripper or None
+
+    def _set_tcp(self) -> None:
+        """Make the robot's EE frame the TCP: ``NE_T_EE = F_T_NE^-1 * FLANGE_T_TCP``."""
+        if self.robot.has_errors:
+            self.robot.recover_from_errors()
+        F_T_NE = np.asarray(self.robot.state.F_T_NE.matrix, dtype=float)
+        self.robot.set_ee(_column_major(np.linalg.inv(F_T_NE) @ self.flange_T_tcp))
+
+    def close(self) -> None:
+        """Drop the connections (franky disconnects when its objects are destroyed)."""
+        self.robot = None  # type: ignore[assignment]
+        self.gripper = None
+
+    def __enter__(self) -> FrankyPanda:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- state -------------------------------------------------------------------------------
+    def _base_T_tcp(self) -> np.ndarray:
+        return np.asarray(
+            self.robot.current_cartesian_state.pose.end_effector_pose.matrix, dtype=float
+        )
+
+    def ee_pose(self) -> Pose:
+        return Pose.from_matrix(self.T_world_base @ self._base_T_tcp())
+
+    @property
+    def joint_positions(self) -> np.ndarray:
+        return np.asarray(self.robot.current_joint_state.position, dtype=float).reshape(7).copy()
+
+    @property
+    def gripper_opening(self) -> float:
+        return float(self.gripper.width) if self.gripper is not None else float("nan")
+
+    def to_base(self, pose: Pose) -> Pose:
+        """A world-frame pose in the robot base frame."""
+        return Pose.from_matrix(self._T_base_world @ pose.matrix())
+
+    # ---- planning (the same arm-only model as the simulated robot) ---------------------------
+    def solve_ik(self, pose: Pose, seeds: Sequence[np.ndarray] | None = None) -> np.ndarray | None:
+        ok, _, result = self._reachable(pose, seeds)
+        return result.q if ok and result is not None else None
+
+    def check_reachable(self, pose: Pose) -> tuple[bool, str]:
+        ok, reason, _ = self._reachable(pose, None)
+        return ok, reason
+
+    def _reachable(
+        self, pose: Pose, seeds: Sequence[np.ndarray] | None
+    ) -> tuple[bool, str, IKResult | None]:
+        if seeds is None:
+            seeds = self._seeds(pose)
+        opening = self._opening_for_checks()
+        reason = "IK did not converge"
+        best: IKResult | None = None
+        for seed in seeds:
+            seed = np.asarray(seed, dtype=float)
+            r = self.arm.solve(pose, seed, seed, opening)
+            if not r.converged:
+                if best is None or r.position_error < best.position_error:
+                    best = r
+                    reason = (
+                        f"IK did not converge (position error {r.position_error * 1000:.1f}"
+                        f" mm, rotation error {math.degrees(r.rotation_error):.1f} deg)"
+                    )
+                continue
+            problem = self.arm.check(r.q, opening)
+            if not problem:
+                return True, "", r
+            reason = problem
+        return False, reason, None
+
+    def _seeds(self, pose: Pose) -> list[np.ndarray]:
+        local = self.to_base(pose)
+        yaw = float(np.clip(math.atan2(local.position[1], local.position[0]), *JOINT_LIMITS[0]))
+        forward, home = FORWARD_QPOS.copy(), HOME_QPOS.copy()
+        forward[0] = home[0] = yaw
+        return [forward, self.joint_positions, home]
+
+    def _opening_for_checks(self) -> float:
+        opening = self.gripper_opening
+        return opening if math.isfinite(opening) else MAX_OPENING
+
+    def check_line(self, target: Pose) -> str:
+        """Empty if IK follows the straight TCP line to ``target`` within limits, free of
+        collisions and without branch jumps (from the current joints); else the reason."""
+        start = self.ee_pose()
+        dist, angle = start.distance_to(target)
+        n = max(1, math.ceil(dist / self.waypoint_spacing), math.ceil(angle / 0.1))
+        q = self.joint_positions
+        opening = self._opening_for_checks()
+        for i in range(1, n + 1):
+            s = i / n
+            r = self.arm.solve(start.interpolate(target, s), q, q, opening)
+            where = f"at {100 * s:.0f}% of the line"
+            if not r.converged:
+                return (
+                    f"unreachable: IK did not converge {where} "
+                    f"(position error {r.position_error * 1000:.1f} mm)"
+                )
+            if np.max(np.abs(r.q - q)) > self.max_joint_jump:
+                return f"unreachable: IK jumped between branches {where}"
+            problem = self.arm.check(r.q, opening)
+            if problem:
+                return f"{problem} {where}"
+            q = r.q
+        return ""
+
+    # ---- motion ------------------------------------------------------------------------------
+    def _cartesian_factor(self, speed: float, angular_speed: float) -> Any:
+        velocity = min(speed / self._v_max, angular_speed / self._w_max, self.dynamics_factor)
+        velocity = max(velocity, 1e-3)
+        return self._franky.RelativeDynamicsFactor(
+            velocity, self.dynamics_factor, self.dynamics_factor
+        )
+
+    def move_to(
+        self, pose: Pose, speed: float = 0.1, angular_speed: float = 0.8, check: bool = True
+    ) -> MoveResult:
+        """Straight-line TCP motion to ``pose`` (world frame); ``check=False`` skips the
+        arm-model check and leaves the judgement to the robot (its reflexes)."""
+        if speed <= 0 or angular_speed <= 0:
+            return MoveResult(False, "speed must be > 0")
+        if check:
+            problem = self.check_line(pose)
+            if problem:
+                return MoveResult(False, problem, self._pos_error(pose))
+        fr = self._franky
+        target = fr.Affine(self._T_base_world @ pose.matrix())
+        motion = fr.CartesianMotion(
+            fr.RobotPose(target),
+            fr.ReferenceType.Absolute,
+            self._cartesian_factor(speed, angular_speed),
+        )
+        return self._run(motion, pose)
+
+    def move_relative(
+        self,
+        delta: np.ndarray,
+        frame: Frame = "world",
+        speed: float = 0.1,
+        check: bool = True,
+    ) -> MoveResult:
+        """Translate the TCP by ``delta`` (m) in ``frame``, as a franky relative motion (the
+        target is expressed in the TCP frame at the start of the motion)."""
+        if speed <= 0:
+            return MoveResult(False, "speed must be > 0")
+        current = self.ee_pose()
+        d = np.asarray(delta, dtype=float).reshape(3)
+        if frame == "camera":
+            d_world = self.T_world_camera[:3, :3] @ d
+        elif frame == "tcp":
+            d_world = current.rotation @ d
+        else:
+            d_world = d
+        target = current.translated(d_world)
+        if check:
+            problem = self.check_line(target)
+            if problem:
+                return MoveResult(False, problem, self._pos_error(target))
+        fr = self._franky
+        d_tcp = current.rotation.T @ d_world
+        motion = fr.CartesianMotion(
+            fr.RobotPose(fr.Affine(d_tcp, np.array([0.0, 0.0, 0.0, 1.0]))),
+            fr.ReferenceType.Relative,
+            self._cartesian_factor(speed, 1.0),
+        )
+        return self._run(motion, target)
+
+    def move_joints(
+        self, q: np.ndarray, speed_factor: float = 0.3, check: bool = True
+    ) -> MoveResult:
+        q = np.asarray(q, dtype=float).reshape(7)
+        if not 0 < speed_factor <= 1:
+            return MoveResult(False, f"speed_factor must be in (0, 1], got {speed_factor}")
+        problem = self.arm.limit_violation(q)
+        if problem:
+            return MoveResult(False, f"joint limit: {problem}")
+        if check:
+            q0 = self.joint_positions
+            n = max(1, math.ceil(np.max(np.abs(q - q0)) / 0.05))
+            opening = self._opening_for_checks()
+            for i in range(1, n + 1):
+                problem = self.arm.check(q0 + (q - q0) * i / n, opening)
+                if problem:
+                    return MoveResult(False, f"{problem} at {100 * i / n:.0f}% of the joint path")
+        fr = self._franky
+        factor = fr.RelativeDynamicsFactor(
+            min(speed_factor, 1.0), self.dynamics_factor, self.dynamics_factor
+        )
+        motion = fr.JointMotion(q, fr.ReferenceType.Absolute, factor)
+        return self._run(motion, None, q)
+
+    def _run(
+        self, motion: Any, target: Pose | None, q_target: np.ndarray | None = None
+    ) -> MoveResult:
+        """Execute ``motion``; a reflex or a refused command becomes a failed MoveResult."""
+        fr = self._franky
+        t0 = time.monotonic()
+        try:
+            self.robot.move(motion, asynchronous=True)
+            finished = self.robot.join_motion(self.motion_timeout)
+        except (fr.ControlException, fr.CommandException, fr.InvalidOperationException) as exc:
+            duration = time.monotonic() - t0
+            recovered = self._recover()
+            reason = f"robot aborted the motion: {type(exc).__name__}: {exc}".strip()
+            reason += "; recovered" if recovered else "; recovery FAILED"
+            err = self._pos_error(target) if target is not None else float("nan")
+            return MoveResult(False, reason, err, duration)
+        duration = time.monotonic() - t0
+        if not finished:
+            self._stop()
+            return MoveResult(
+                False,
+                f"motion did not finish within {self.motion_timeout:.0f} s; stopped",
+                self._pos_error(target) if target is not None else float("nan"),
+                duration,
+            )
+        settle_until = time.monotonic() + self.settle_time
+        if target is None:
+            assert q_target is not None
+            while True:
+                err_q = float(np.max(np.abs(self.joint_positions - q_target)))
+                if err_q <= self.joint_tolerance or time.monotonic() > settle_until:
+                    break
+                time.sleep(0.01)
+            if err_q > self.joint_tolerance:
+                return MoveResult(
+                    False, f"joint target not reached (error {err_q:.3f} rad)", duration=duration
+                )
+            return MoveResult(True, "", self._pos_error(self.arm.fk(q_target)), duration)
+        while True:
+            pos_err, rot_err = self.ee_pose().distance_to(target)
+            reached = pos_err <= self.position_tolerance and rot_err <= self.rotation_tolerance
+            if reached or time.monotonic() > settle_until:
+                break
+            time.sleep(0.01)
+        if not reached:
+            return MoveResult(
+                False,
+                f"target not reached within tolerance (error {pos_err * 1000:.1f} mm, "
+                f"{math.degrees(rot_err):.1f} deg)",
+                pos_err,
+                duration,
+            )
+        return MoveResult(True, "", pos_err, duration)
+
+    def _stop(self) -> None:
+        fr = self._franky
+        try:
+            self.robot.stop()
+            self.robot.join_motion(5.0)
+        except (fr.ControlException, fr.CommandException, fr.InvalidOperationException):
+            pass
+        self._recover()
+
+    def _recover(self) -> bool:
+        fr = self._franky
+        try:
+            return bool(self.robot.recover_from_errors())
+        except (fr.ControlException, fr.CommandException, fr.InvalidOperationException):
+            return False
+
+    def recover(self) -> None:
+        self._recover()
+
+    def _pos_error(self, target: Pose) -> float:
+        return float(np.linalg.norm(self.ee_pose().position - target.position))
+
+    # ---- gripper -----------------------------------------------------------------------------
+    def open(self, width: float = MAX_OPENING, speed: float = 0.1) -> bool:
+        if self.gripper is None:
+            return False
+        fr = self._franky
+        width = float(np.clip(width, 0.0, MAX_OPENING))
+        try:
+            return bool(self.gripper.move(width, speed))
+        except (fr.GripperException, fr.CommandException):
+            return False
+
+    def grasp(
+        self,
+        width: float = 0.015,
+        force: float = 70.0,
+        speed: float = 0.05,
+        epsilon_inner: float = 0.01,
+        epsilon_outer: float = 0.01,
+    ) -> bool:
+        if self.gripper is None:
+            return False
+        fr = self._franky
+        try:
+            return bool(self.gripper.grasp(width, speed, force, epsilon_inner, epsilon_outer))
+        except (fr.GripperException, fr.CommandException):
+            return False
+
+
+# ---- the franka-sim server's arm model -------------------------------------------------------
+def franka_sim_mjcf() -> str:
+    """MJCF of our Panda for the ``franka-sim`` server (its ``$FR3_MJCF``), as an XML string.
+
+    franka-sim reports the pose of the body ``link7`` (composed with ``F_T_EE``) as ``O_T_EE``,
+    i.e. it treats ``link7`` as the flange.  Here ``link7``'s frame is moved to the flange
+    (``HAND_OFFSET`` further along its joint axis, the joint and geoms shifted back) so the
+    kinematics are unchanged and ``O_T_EE`` means what it means on the real robot.  The fingers,
+    tendon, equalities and actuators are removed: the server simulates the arm and runs its own
+    gripper model.  Each link's largest geom is named ``link{N}_collision``, which arms the
+    server's self-collision reflex (with ``enforce_motion_limits``).  MuJoCo >= 3.2 reads it.
+    """
+    from cablesim.sim.panda import panda_spec
+
+    spec = panda_spec(home_key=False)
+    hand = spec.body("hand")
+    for name in ("left_finger", "right_finger"):
+        spec.delete(spec.body(name))
+    for collection in (spec.equalities, spec.tendons, spec.actuators):
+        for element in list(collection):
+            spec.delete(element)
+    hand.mass += 0.03  # the two fingers
+    link7 = spec.body("link7")
+    shift = np.array([0.0, 0.0, HAND_OFFSET])
+    R = np.zeros(9)
+    quat = np.asarray(link7.quat, dtype=float)
+    mujoco.mju_quat2Mat(R, quat / np.linalg.norm(quat))
+    link7.pos = (np.asarray(link7.pos) + R.reshape(3, 3) @ shift).tolist()
+    link7.ipos = (np.asarray(link7.ipos) - shift).tolist()
+    for joint in link7.joints:
+        joint.pos = (np.asarray(joint.pos) - shift).tolist()
+    for geom in link7.geoms:
+        fromto = np.asarray(geom.fromto, dtype=float)
+        if np.all(np.isfinite(fromto)) and np.any(fromto != 0.0):
+            geom.fromto = (fromto - np.concatenate([shift, shift])).tolist()
+        else:
+            geom.pos = (np.asarray(geom.pos) - shift).tolist()
+    for site in link7.sites:
+        site.pos = (np.asarray(site.pos) - shift).tolist()
+    hand.pos = (np.asarray(hand.pos) - shift).tolist()
+    # franka-sim's self-collision reflex watches one geom per link, ``link{N}_collision``:
+    # give that name to each link's largest geom.
+    model = spec.compile()
+    for n in range(8):
+        body = model.body(f"link{n}").id
+        geoms = np.flatnonzero(model.geom_bodyid == body)
+        largest = int(geoms[np.argmax(model.geom_rbound[geoms])])
+        spec.geom(model.geom(largest).name).name = f"link{n}_collision"
+    spec.compile()
+    return spec.to_xml()
