@@ -38,4 +38,11 @@ case "$extras" in
 esac
 echo "[setup] installing cablesim $spec"
 .venv/bin/python -m pip install -q -e "$spec" 2>&1 | grep -v '^WARNING: Location' || true
+if [ "$extras" = "dev" ] && [ ! -x .cache/franka-sim-venv/bin/python ]; then
+  # the franka-sim test server for the real-robot adapter needs mujoco 3.2 and numpy 1.26:
+  # it gets an environment of its own (tests/robot/test_franky_panda.py looks for it here)
+  echo "[setup] installing the franka-sim test server into .cache/franka-sim-venv"
+  "$PY" -m venv .cache/franka-sim-venv
+  .cache/franka-sim-venv/bin/python -m pip install -q franka-sim==1.1.7 2>&1 | grep -v '^WARNING: Location' || true
+fi
 .venv/bin/python -c "import cablesim, mujoco; print('[setup] cablesim', cablesim.__version__, 'mujoco', mujoco.__version__, 'GL', cablesim.gl.select_backend())"
