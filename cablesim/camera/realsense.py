@@ -105,13 +105,26 @@ class RealSenseCamera(Camera):
             if sensor.is_depth_sensor():
                 scale = float(sensor.as_depth_sensor().get_depth_scale())
             sensor.open(sensor.get_stream_profiles())
+        # playback begins with the first started sensor: hold it until every sensor listens,
+        # or the first frames of the others are lost
+        playback.pause()
+        for sensor in sensors:
             sensor.start(on_frame)
+        playback.resume()
+        # Done when playback has stopped and no frame arrived for a while: the status reads
+        # "stopped" also before playback has begun, so the status alone is not enough.
         deadline = time.monotonic() + 60.0
-        while playback.current_status() != rs.playback_status.stopped:
-            if time.monotonic() > deadline:
+        seen, quiet_since = -1, time.monotonic()
+        while time.monotonic() < deadline:
+            time.sleep(0.01)
+            count = sum(len(v) for v in got.values())
+            if count != seen:
+                seen, quiet_since = count, time.monotonic()
+            elif (
+                playback.current_status() == rs.playback_status.stopped
+                and time.monotonic() - quiet_since > 0.3
+            ):
                 break
-            time.sleep(0.005)
-        time.sleep(0.1)  # the last callbacks may still be running
         for sensor in sensors:
             sensor.stop()
             sensor.close()
@@ -207,22 +220,18 @@ def write_recording(
     images: Iterable[CameraImage],
     depth_unit: float = 0.001,
     fps: int = 15,
-    attempts: int = 3,
 ) -> int:
     """Write ``images`` (all of one size) as a RealSense ``.db3`` recording; returns the count.
 
-    librealsense's recorder runs on its own threads and, on a loaded machine, occasionally
-    loses a frame; the file is read back and written again (up to ``attempts`` times) until it
-    holds every frame."""
-    images = list(images)
-    for _ in range(attempts):
-        n = _write_once(path, images, depth_unit, fps)
-        cam = RealSenseCamera(path)
-        held = len(cam._frames)
-        cam.close()
-        if held == n:
-            return n
-    raise RecordingError(f"librealsense kept {held} of {n} frames in {path} after {attempts} tries")
+    The file is read back once: librealsense's recorder runs on its own threads, and a
+    recording that lost a frame raises ``RecordingError`` instead of passing silently."""
+    n = _write_once(path, list(images), depth_unit, fps)
+    cam = RealSenseCamera(path)
+    held = len(cam._frames)
+    cam.close()
+    if held != n:
+        raise RecordingError(f"librealsense kept {held} of {n} frames in {path}")
+    return n
 
 
 def _write_once(
