@@ -302,7 +302,9 @@ def test_unreachable_target_is_refused_without_moving(at_home: FrankyPanda) -> N
     assert robot.solve_ik(far) is None
     result = robot.move_to(far, speed=0.1)
     assert not result and result.reason.startswith("unreachable")
-    np.testing.assert_allclose(robot.joint_positions, q0, atol=0.01)
+    # the simulated arm still settles by up to ~0.01 rad after homing; a motion towards
+    # the refused target would move it by far more
+    np.testing.assert_allclose(robot.joint_positions, q0, atol=0.03)
 
 
 def test_colliding_joint_target_is_refused(at_home: FrankyPanda) -> None:
@@ -311,7 +313,9 @@ def test_colliding_joint_target_is_refused(at_home: FrankyPanda) -> None:
     folded = np.array([0.0, 1.5, 0.0, -3.0, 0.0, 1.5, 0.785])  # hand into the base
     result = robot.move_joints(folded)
     assert not result and "collision" in result.reason
-    np.testing.assert_allclose(robot.joint_positions, q0, atol=0.01)
+    # the simulated arm still settles by up to ~0.01 rad after homing; a motion towards
+    # the refused target would move it by far more
+    np.testing.assert_allclose(robot.joint_positions, q0, atol=0.03)
 
 
 def test_reflex_is_reported_and_recovered(at_home: FrankyPanda) -> None:
