@@ -43,11 +43,11 @@ class PerturbConfig:
     hoses: tuple[int, ...] | None = None  # None: every hose but the hose of interest
     points: int = 2  # vertex bodies pulled per hose
     span: tuple[float, float] = (0.3, 0.7)  # where along the hose (fraction of its vertices)
-    amplitude: tuple[float, float] = (0.02, 0.04)  # m, drawn per action and hose
-    period: tuple[float, float] = (0.7, 1.6)  # s, drawn per action and hose
-    stiffness: float = 400.0  # N/m
-    damping: float = 6.0  # N s/m
-    max_force: float = 8.0  # N per vertex
+    amplitude: tuple[float, float] = (0.01, 0.03)  # m, drawn per action and hose
+    period: tuple[float, float] = (2.5, 4.0)  # s: slower than a 1 m hose swings (~1.6 s)
+    stiffness: float = 120.0  # N/m
+    damping: float = 3.0  # N s/m
+    max_force: float = 2.0  # N per vertex
 
     def __post_init__(self) -> None:
         if self.hoses is not None:
