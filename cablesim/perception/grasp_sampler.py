@@ -217,10 +217,19 @@ class GraspSampler:
         """The next grasp from ``votes`` (HxW int, actions supporting each pixel)."""
         if intrinsics is None:
             raise InputError("intrinsics are missing")
+        if not isinstance(intrinsics, Intrinsics):
+            raise InputError(f"intrinsics must be an Intrinsics, got {type(intrinsics).__name__}")
         depth = as_depth(depth)
         votes = np.asarray(votes)
         if votes.shape != depth.shape:
             raise InputError(f"votes {votes.shape} and depth {depth.shape} differ in size")
+        if depth.shape != (intrinsics.height, intrinsics.width):
+            # checked here: inside the per-candidate checks it would only reject every
+            # candidate as "depth" and silently give no proposal
+            raise InputError(
+                f"depth is {depth.shape[1]}x{depth.shape[0]} but intrinsics are for "
+                f"{intrinsics.width}x{intrinsics.height}"
+            )
         if not (np.issubdtype(votes.dtype, np.integer) or votes.dtype == np.bool_):
             raise InputError(f"votes must be an integer (or bool) image, got {votes.dtype}")
         votes = votes.astype(np.int32)

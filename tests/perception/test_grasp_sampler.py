@@ -160,6 +160,10 @@ def test_sampler_bad_input():
         s.propose(np.zeros((10, 10), np.int16), DEPTH, K)
     with pytest.raises(InputError, match="integer"):
         s.propose(np.zeros((H, W), np.float32), DEPTH, K)
+    with pytest.raises(InputError, match="intrinsics are for"):
+        s.propose(np.zeros((H, W), np.int16), DEPTH, K.scaled(2.0))
+    with pytest.raises(InputError, match="Intrinsics"):
+        s.propose(np.zeros((H, W), np.int16), DEPTH, K.to_dict())
     with pytest.raises(InputError, match="area_min"):
         GraspSamplerParams(area_min=10, area_max=5)
     assert s.propose(np.zeros((H, W), np.int16), DEPTH, K).proposal is None
