@@ -25,6 +25,7 @@ import numpy as np
 from cablesim.errors import InputError
 from cablesim.perception.actions import (
     action_direction,
+    gripper_displacements,
     subsample_by_gripper,
 )
 from cablesim.perception.correlation import (
@@ -93,11 +94,9 @@ def plan_jobs(stream: Stream, delta_g: float = 0.001) -> list[Job]:
     for a in stream.actions:
         frames = stream.action_frames(a)
         kept = subsample_by_gripper(frames, delta_g)
-        u = action_direction(frames)
-        g1 = np.asarray(kept[0].gripper, np.float64)
-        for i, f in enumerate(kept):
-            d = float((np.asarray(f.gripper) - g1) @ u)
-            jobs.append(Job(a, i, f, d, float(f.gripper[2])))
+        d_g = gripper_displacements(kept, action_direction(frames))
+        for i, (f, d) in enumerate(zip(kept, d_g, strict=True)):
+            jobs.append(Job(a, i, f, float(d), float(f.gripper[2])))
     return jobs
 
 
