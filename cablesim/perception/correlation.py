@@ -68,6 +68,16 @@ class AblationParams:
     depth_mode: DepthMode = "gripper"
     min_samples: int = 3
 
+    def __post_init__(self) -> None:
+        if self.tau_n < 0:
+            raise InputError(f"tau_n must be >= 0, got {self.tau_n}")
+        if self.std_min < 0:
+            raise InputError(f"std_min must be >= 0, got {self.std_min}")
+        if self.depth_mode not in ("gripper", "pixel"):
+            raise InputError(f"depth_mode must be 'gripper' or 'pixel', got {self.depth_mode!r}")
+        if self.min_samples < 2:
+            raise InputError(f"min_samples must be >= 2, got {self.min_samples}")
+
 
 @dataclass
 class CorrelationResult:
@@ -151,7 +161,6 @@ class CorrelationAccumulator:
             b["fy"][:] = flow[..., 1]
         if self._ref is None:
             self._ref = (b["fx"].copy(), b["fy"].copy())
-            self._ref_dg = d_g
             # the reference has r = 0 <= tau_n everywhere: it contributes no sample
             return
         m = self._m
