@@ -36,6 +36,7 @@ import numpy as np
 from scipy import ndimage
 
 from cablesim.config import to_dict
+from cablesim.errors import InputError
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.frames import Intrinsics
 from cablesim.perception.geometry import eccentricity, segment_pose
@@ -234,7 +235,7 @@ def random_segment(
             continue
         try:
             sp = segment_pose(seg, depth, intrinsics)
-        except Exception:  # noqa: BLE001 - InputError: too little depth
+        except InputError:  # too little depth under the segment
             continue
         if previous and min(np.linalg.norm(p - sp.centre) for p in previous) < min_distance:
             continue
@@ -333,7 +334,6 @@ def explore(
             from cablesim.perception.correlation import AblationParams
 
             params = AblationParams()
-        assert isinstance(params, object)
         segment, source = picked.mask, "start"
         prev_snap = camera.snapshot() if merge == "oracle" else None
         previous_centres: list[np.ndarray] = []
