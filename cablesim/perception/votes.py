@@ -68,7 +68,11 @@ class VoteAccumulator:
         self.n_grasps = 0
 
     def add(self, masks: Sequence[np.ndarray] | np.ndarray) -> None:
-        """Add the action masks of one grasp (a list of HxW masks, or one HxW vote image)."""
+        """Add the action masks of one grasp (a list of HxW masks, or one HxW mask).
+
+        Each mask counts as one action; a non-zero integer image is read as a mask (one vote
+        per pixel), not as a vote count.
+        """
         if isinstance(masks, np.ndarray) and masks.ndim == 2:
             masks = [masks]
         for i, m in enumerate(masks):
