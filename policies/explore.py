@@ -337,6 +337,7 @@ def explore(
         segment, source = picked.mask, "start"
         prev_snap = camera.snapshot() if merge == "oracle" else None
         previous_centres: list[np.ndarray] = []
+        depth, K = start.depth, start.intrinsics  # the image the current segment lies in
         while len(result.successes) < cfg.grasps and len(result.interactions) < cfg.max_attempts:
             k = len(result.interactions)
             labels_now = camera.render_labels()
@@ -355,6 +356,11 @@ def explore(
             centre_cam = None
             if ep.centre is not None:
                 centre_cam = world.world_to_camera(ep.centre[None])[0]
+            else:  # failed before the runner estimated it: blacklist the segment all the same
+                try:
+                    centre_cam = segment_pose(segment, depth, K).centre
+                except InputError:
+                    pass
             if not ep.success or ep.stream is None:
                 say(f"interaction {k} failed: {ep.reason}")
                 if centre_cam is not None:
