@@ -146,14 +146,24 @@ def test_robot_bodies_descend_from_root():
 
 
 def test_robot_pixels_labelled_robot():
-    try:
-        world = World.build(
-            SceneConfig(seed=0, camera=CameraConfig(width=W, height=H), robot=RobotConfig())
-        )
-    except (ImportError, AttributeError) as e:  # the arm is being integrated
-        pytest.skip(f"the Panda cannot be built yet: {e}")
+    """The parked arm shows no pixel; moved into view (home), every pixel rendered on a robot
+    body is labelled robot and no other pixel is (the zero-robot-pixel checks of the target
+    frame rely on this labelling)."""
+    import mujoco
+
+    from cablesim.sim.panda import HOME_QPOS, joint_qpos_addresses
+
+    world = World.build(
+        SceneConfig(seed=0, camera=CameraConfig(width=W, height=H), robot=RobotConfig())
+    )
     with SimCamera(world) as cam:
         assert cam.robot_bodies.size > 0
         labels = cam.render_labels()
-    assert labels.dtype == np.int16
-    assert set(np.unique(labels).tolist()) <= {LABEL_ROBOT, LABEL_BACKGROUND, 0, 1, 2, 3}
+        assert labels.dtype == np.int16
+        assert set(np.unique(labels).tolist()) <= {LABEL_BACKGROUND, 0, 1, 2, 3}  # parked
+        world.data.qpos[joint_qpos_addresses(world.model, world.panda.joints)] = HOME_QPOS
+        mujoco.mj_forward(world.model, world.data)
+        snap = cam.snapshot()
+    robot = snap.labels == LABEL_ROBOT
+    assert robot.sum() > 500
+    assert np.array_equal(robot, np.isin(snap.body, cam.robot_bodies))
