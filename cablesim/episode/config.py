@@ -85,7 +85,7 @@ class CaptureConfig:
 
 
 #: The retract configuration turned away about joint 1: zero robot pixels in the default camera
-#: for joint 1 in [-2.10, -1.70] (tests/episode/test_retreat.py checks it).
+#: for joint 1 in [-2.10, -1.70] (tests/episode/test_failures_retreat.py checks it).
 FALLBACK_RETREAT_QPOS = (-1.9, -0.6, 0.0, -2.3, 0.0, 1.7, 0.785398)
 
 
