@@ -135,6 +135,7 @@ class CorrelationAccumulator:
         z = np.zeros(self.shape, self.dtype)
         self._m = {k: z.copy() for k in _NAMES}
         self._ref: tuple[np.ndarray, np.ndarray] | None = None
+        self._ref_invalid: np.ndarray | None = None  # pixels without a reference flow
         self._buf = {k: np.empty(self.shape, self.dtype) for k in ("rx", "ry", "fx", "fy", "mag")}
         self.samples = 0
         self._zsum = 0.0
@@ -159,8 +160,16 @@ class CorrelationAccumulator:
         else:
             b["fx"][:] = flow[..., 0]
             b["fy"][:] = flow[..., 1]
+        # Non-finite flow (e.g. ``OracleFlow(invalid_value=nan)``) means "no measurement": the
+        # pixel gives no sample in this frame, or in any frame if the reference lacks it.
+        invalid = None
+        if not cv2.checkRange(flow, quiet=True)[0]:
+            invalid = ~np.isfinite(flow).all(axis=2)
+            b["fx"][invalid] = 0.0
+            b["fy"][invalid] = 0.0
         if self._ref is None:
             self._ref = (b["fx"].copy(), b["fy"].copy())
+            self._ref_invalid = invalid
             # the reference has r = 0 <= tau_n everywhere: it contributes no sample
             return
         m = self._m
@@ -170,6 +179,9 @@ class CorrelationAccumulator:
         cv2.magnitude(rx, ry, mag)
         # mag <- 1.0 where |r| > tau_n else 0.0, in place (float 0/1 mask)
         cv2.threshold(mag, self.params.tau_n, 1.0, cv2.THRESH_BINARY, mag)
+        for bad in (invalid, self._ref_invalid):
+            if bad is not None:
+                mag[bad] = 0.0
         if scale != 1.0:
             cv2.multiply(rx, mag, rx, scale)
             cv2.multiply(ry, mag, ry, scale)
