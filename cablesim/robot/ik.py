@@ -58,9 +58,11 @@ class Obstacle:
 def static_obstacles(
     model: mujoco.MjModel, data: mujoco.MjData, exclude_bodies: Sequence[int] = ()
 ) -> list[Obstacle]:
-    """Primitive geoms fixed to the world that can collide (table, board, connectors).
+    """Geoms fixed to the world: the colliding primitives (table, board) and the meshes
+    (connectors and hose couplings, which are visual in the scene but solid on a real board).
 
-    Planes become thin boxes.  ``data`` must have current kinematics (after mj_forward).
+    Planes become thin boxes, meshes their bounding boxes.  ``data`` must have current
+    kinematics (after mj_forward).
     """
     excluded = set(int(b) for b in exclude_bodies)
     out: list[Obstacle] = []
@@ -68,9 +70,17 @@ def static_obstacles(
         body = int(model.geom_bodyid[g])
         if body in excluded or model.body_weldid[body] != 0:
             continue
+        gtype = int(model.geom_type[g])
+        if gtype == mujoco.mjtGeom.mjGEOM_MESH:
+            quat = np.zeros(4)
+            mujoco.mju_mat2Quat(quat, data.geom_xmat[g])
+            aabb = model.geom_aabb[g]
+            centre = data.geom_xpos[g] + data.geom_xmat[g].reshape(3, 3) @ aabb[:3]
+            name = model.geom(g).name or f"geom{g}"
+            out.append(Obstacle.box(name, tuple(centre), tuple(aabb[3:]), tuple(quat)))
+            continue
         if model.geom_contype[g] == 0 and model.geom_conaffinity[g] == 0:
             continue
-        gtype = int(model.geom_type[g])
         if gtype not in _PRIMITIVES:
             continue
         size = tuple(float(s) for s in model.geom_size[g])
