@@ -75,5 +75,7 @@ def check_range(
 
 
 def check_positive(field: str, value: float, allow_zero: bool = False) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ConfigError(field, f"must be a number, got {value!r}")
     if not (value >= 0 if allow_zero else value > 0):
         raise ConfigError(field, f"must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")

@@ -39,8 +39,17 @@ class GraspConfig:
     open_width: float = 0.08
 
     def validate(self) -> None:
-        for name in ("pregrasp_offset", "approach_speed", "travel_speed", "width", "force"):
+        for name in (
+            "pregrasp_offset",
+            "approach_speed",
+            "travel_speed",
+            "width",
+            "force",
+            "epsilon",
+            "open_width",
+        ):
             check_positive(f"grasp.{name}", getattr(self, name))
+        check_positive("grasp.surface_offset", self.surface_offset, allow_zero=True)
         check_positive("grasp.hold_check_distance", self.hold_check_distance, allow_zero=True)
         check_positive("grasp.hold_tolerance", self.hold_tolerance)
 
@@ -67,6 +76,7 @@ class ActionConfig:
             raise ConfigError("actions.directions", "need at least one action direction")
         check_positive("actions.amplitude", self.amplitude)
         check_positive("actions.speed", self.speed)
+        check_positive("actions.stroke_tolerance", self.stroke_tolerance, allow_zero=True)
         if not isinstance(self.periods, int) or self.periods < 1:
             raise ConfigError("actions.periods", f"must be an integer >= 1, got {self.periods!r}")
 
@@ -118,6 +128,9 @@ class RetreatConfig:
         if self.qpos is not None and len(self.qpos) != 7:
             raise ConfigError("retreat.qpos", f"need 7 joint angles, got {len(self.qpos)}")
         check_positive("retreat.back_off", self.back_off, allow_zero=True)
+        if not 0 < self.speed_factor <= 1:
+            raise ConfigError("retreat.speed_factor", f"must be in (0, 1], got {self.speed_factor}")
+        check_positive("retreat.settle_check_every", self.settle_check_every)
         check_positive("retreat.settle_speed", self.settle_speed)
         check_positive("retreat.settle_max_time", self.settle_max_time)
 
@@ -140,7 +153,11 @@ class EpisodeConfig:
     def validate(self) -> EpisodeConfig:
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
-        if self.hose is not None and not 0 <= self.hose < self.scene.hoses.count:
+        if self.hose is not None and (
+            isinstance(self.hose, bool)
+            or not isinstance(self.hose, int)
+            or not 0 <= self.hose < self.scene.hoses.count
+        ):
             raise ConfigError("hose", f"{self.hose} is not one of {self.scene.hoses.count} hoses")
         if self.kind not in ("grasp", "push"):
             raise ConfigError("kind", f"must be 'grasp' or 'push', got {self.kind!r}")

@@ -168,7 +168,7 @@ class PhysicsConfig:
     settle_max_time: float = 20.0  # simulated seconds before giving up
     settle_check_every: float = 0.1
     gravity: float = -9.81
-    cache: bool = True  # cache the settled state per config (see cablesim.sim.cache)
+    cache: bool = True  # cache the settled state per config (see cablesim.sim.settle)
 
     def validate(self) -> None:
         if not 0 < self.timestep <= 0.016:

@@ -110,3 +110,40 @@ def test_push_episode(scene):
     print(f"push: hose displacement (mm) {np.round(np.array(moved) * 1000, 1)}")
     assert moved[1] > 0.005  # the pushed hose moved
     assert all(f.gripper_opening < 0.005 for f in res.stream if not f.is_target)
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        ({"hose": "1"}, "hose"),
+        ({"hose": 9}, "hose"),
+        ({"kind": "pull"}, "kind"),
+    ],
+)
+def test_bad_episode_config_names_the_field(change, field) -> None:
+    from cablesim.episode.config import EpisodeConfig
+    from cablesim.errors import ConfigError
+
+    with pytest.raises(ConfigError) as e:
+        EpisodeConfig(**change).validate()
+    assert e.value.field == field
+
+
+@pytest.mark.parametrize(
+    ("section", "name", "value"),
+    [
+        ("grasp", "epsilon", -0.01),
+        ("grasp", "force", "strong"),
+        ("actions", "stroke_tolerance", -1.0),
+        ("retreat", "speed_factor", 2.0),
+    ],
+)
+def test_bad_episode_section_values_name_the_field(section, name, value) -> None:
+    from cablesim.episode.config import EpisodeConfig
+    from cablesim.errors import ConfigError
+
+    cfg = EpisodeConfig()
+    setattr(getattr(cfg, section), name, value)
+    with pytest.raises(ConfigError) as e:
+        cfg.validate()
+    assert e.value.field == f"{section}.{name}"
