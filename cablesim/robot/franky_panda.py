@@ -44,13 +44,10 @@ import numpy as np
 from cablesim.robot.base import Frame, MoveResult, Robot
 from cablesim.robot.ik import ArmModel, IKResult, Obstacle
 from cablesim.robot.pose import Pose
-from cablesim.sim.panda import HAND_OFFSET, HOME_QPOS, JOINT_LIMITS, MAX_OPENING, TCP_OFFSET
+from cablesim.sim.panda import HAND_OFFSET, MAX_OPENING, TCP_OFFSET
 
 if TYPE_CHECKING:  # pragma: no cover
     import franky
-
-#: A configuration with the hand pointing along +x, elbow up (the simulated robot's IK seed).
-FORWARD_QPOS = np.array([0.0, -0.6, 0.0, -2.3, 0.0, np.pi / 2 + 1.7, np.pi / 4])
 
 
 def _flange_t_tcp() -> np.ndarray:
@@ -204,33 +201,8 @@ class FrankyPanda(Robot):
         self, pose: Pose, seeds: Sequence[np.ndarray] | None
     ) -> tuple[bool, str, IKResult | None]:
         if seeds is None:
-            seeds = self._seeds(pose)
-        opening = self._opening_for_checks()
-        reason = "IK did not converge"
-        best: IKResult | None = None
-        for seed in seeds:
-            seed = np.asarray(seed, dtype=float)
-            r = self.arm.solve(pose, seed, seed, opening)
-            if not r.converged:
-                if best is None or r.position_error < best.position_error:
-                    best = r
-                    reason = (
-                        f"IK did not converge (position error {r.position_error * 1000:.1f}"
-                        f" mm, rotation error {math.degrees(r.rotation_error):.1f} deg)"
-                    )
-                continue
-            problem = self.arm.check(r.q, opening)
-            if not problem:
-                return True, "", r
-            reason = problem
-        return False, reason, None
-
-    def _seeds(self, pose: Pose) -> list[np.ndarray]:
-        local = self.to_base(pose)
-        yaw = float(np.clip(math.atan2(local.position[1], local.position[0]), *JOINT_LIMITS[0]))
-        forward, home = FORWARD_QPOS.copy(), HOME_QPOS.copy()
-        forward[0] = home[0] = yaw
-        return [forward, self.joint_positions, home]
+            seeds = self.arm.seeds(pose, self.joint_positions)
+        return self.arm.reach(pose, seeds, self._opening_for_checks())
 
     def _opening_for_checks(self) -> float:
         opening = self.gripper_opening

@@ -7,6 +7,7 @@ connectors) copied in as primitive geoms.  Checking a configuration never touche
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -16,6 +17,7 @@ import numpy as np
 
 from cablesim.robot.pose import Pose
 from cablesim.sim.panda import (
+    HOME_QPOS,
     JOINT_LIMITS,
     PandaNames,
     attach_panda,
@@ -108,6 +110,11 @@ class IKResult:
     iterations: int
 
 
+#: A configuration with the hand pointing along +x (towards the board), elbow up.
+#: Planar, so joint6 = pi/2 + joint2 - joint4; TCP at about (0.49, 0, 0.76) from the base.
+FORWARD_QPOS = np.array([0.0, -0.6, 0.0, -2.3, 0.0, np.pi / 2 + 1.7, np.pi / 4])
+
+
 class ArmModel:
     """The arm alone (at the scene's base pose) with static obstacles, for IK and checks."""
 
@@ -121,6 +128,7 @@ class ArmModel:
         max_iterations: int = 60,
     ):
         spec = mujoco.MjSpec()
+        self.base = Pose(np.asarray(base_pos, dtype=float), np.asarray(base_quat, dtype=float))
         self.names: PandaNames = attach_panda(spec, base_pos, base_quat, prefix="arm/")
         for ob in obstacles:
             g = spec.worldbody.add_geom(
@@ -252,6 +260,39 @@ class ArmModel:
                 continue
             out.append((m.geom(g1).name, m.geom(g2).name, float(c.dist)))
         return out
+
+    def seeds(self, pose: Pose, current: np.ndarray) -> list[np.ndarray]:
+        """IK starts for ``pose``: the forward posture turned (joint 1) towards it, the
+        current joints, and home turned towards it."""
+        local = self.base.inverse() @ pose
+        yaw = float(np.clip(math.atan2(local.position[1], local.position[0]), *JOINT_LIMITS[0]))
+        forward, home = FORWARD_QPOS.copy(), HOME_QPOS.copy()
+        forward[0] = home[0] = yaw
+        return [forward, np.asarray(current, dtype=float), home]
+
+    def reach(
+        self, pose: Pose, seeds: Sequence[np.ndarray], opening: float
+    ) -> tuple[bool, str, IKResult | None]:
+        """The first seed's IK solution within limits and free of collisions, or the reason
+        none was found (the closest miss when IK did not converge)."""
+        reason = "IK did not converge"
+        best: IKResult | None = None
+        for seed in seeds:
+            seed = np.asarray(seed, dtype=float)
+            r = self.solve(pose, seed, seed, opening)
+            if not r.converged:
+                if best is None or r.position_error < best.position_error:
+                    best = r
+                    reason = (
+                        f"IK did not converge (position error {r.position_error * 1000:.1f}"
+                        f" mm, rotation error {math.degrees(r.rotation_error):.1f} deg)"
+                    )
+                continue
+            problem = self.check(r.q, opening)
+            if not problem:
+                return True, "", r
+            reason = problem
+        return False, reason, None
 
     def check(self, q: np.ndarray, opening: float = 0.08) -> str:
         """Empty string if ``q`` is within limits and collision-free, else the reason."""

@@ -27,7 +27,6 @@ from cablesim.robot.base import MoveResult, Robot
 from cablesim.robot.ik import ArmModel, IKResult, Obstacle, static_obstacles
 from cablesim.robot.pose import Pose
 from cablesim.sim.panda import (
-    HOME_QPOS,
     JOINT_LIMITS,
     MAX_OPENING,
     PandaNames,
@@ -36,9 +35,6 @@ from cablesim.sim.panda import (
     set_grasp_force,
 )
 
-#: A configuration with the hand pointing along +x (towards the board), elbow up.
-#: Planar, so joint6 = pi/2 + joint2 - joint4; TCP at about (0.49, 0, 0.76) from the base.
-FORWARD_QPOS = np.array([0.0, -0.6, 0.0, -2.3, 0.0, np.pi / 2 + 1.7, np.pi / 4])
 #: The same arm pose with the hand pointing down (TCP about (0.37, 0, 0.46)): a collision-free
 #: way point between HOME_QPOS (TCP 5 cm from a board at x = 0.6) and poses facing the board.
 RETRACT_QPOS = np.array([0.0, -0.6, 0.0, -2.3, 0.0, 1.7, np.pi / 4])
@@ -175,37 +171,8 @@ class SimPanda(Robot):
         self, pose: Pose, seeds: Sequence[np.ndarray] | None
     ) -> tuple[bool, str, IKResult | None]:
         if seeds is None:
-            seeds = self._seeds(pose)
-        opening = self.gripper_opening
-        reason = "IK did not converge"
-        best: IKResult | None = None
-        for seed in seeds:
-            r = self.arm.solve(
-                pose, np.asarray(seed, dtype=float), np.asarray(seed, dtype=float), opening
-            )
-            if not r.converged:
-                if best is None or r.position_error < best.position_error:
-                    best = r
-                    reason = (
-                        f"IK did not converge (position error {r.position_error * 1000:.1f}"
-                        f" mm, rotation error {math.degrees(r.rotation_error):.1f} deg)"
-                    )
-                continue
-            problem = self.arm.check(r.q, opening)
-            if not problem:
-                return True, "", r
-            reason = problem
-        return False, reason, None
-
-    def _seeds(self, pose: Pose) -> list[np.ndarray]:
-        """The forward posture turned (joint 1) to the target, the current joints, home turned."""
-        base_pos, base_quat = self.world.panda_base
-        base = Pose(np.asarray(base_pos, dtype=float), np.asarray(base_quat, dtype=float))
-        local = base.inverse() @ pose
-        yaw = float(np.clip(math.atan2(local.position[1], local.position[0]), *JOINT_LIMITS[0]))
-        forward, home = FORWARD_QPOS.copy(), HOME_QPOS.copy()
-        forward[0] = home[0] = yaw
-        return [forward, self.joint_positions, home]
+            seeds = self.arm.seeds(pose, self.joint_positions)
+        return self.arm.reach(pose, seeds, self.gripper_opening)
 
     def plan_line(self, target: Pose) -> tuple[list[np.ndarray], str]:
         """Joint waypoints along the straight TCP line to ``target``; empty list + reason on failure."""

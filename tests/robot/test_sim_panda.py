@@ -28,7 +28,8 @@ def test_ik_reaches_reachable_pose_and_reports_ik_speed(robot: SimPanda):
     target = _hose_grasp(robot.world)
     q0 = robot.joint_positions
     t = time.perf_counter()
-    r = robot.arm.solve(target, robot._seeds(target)[1], robot._seeds(target)[1])
+    current = robot.arm.seeds(target, robot.joint_positions)[1]
+    r = robot.arm.solve(target, current, current)
     per_iter = (time.perf_counter() - t) / max(r.iterations, 1)
     print(f"IK: {r.iterations} iterations, {per_iter * 1e3:.2f} ms/iteration")
     assert r.converged
