@@ -20,13 +20,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from cablesim.policies.perturb import PerturbConfig, PerturbedWorld
 
 import cablesim  # noqa: F401  (headless GL before mujoco)
 from cablesim.episode.config import EpisodeConfig
 from cablesim.perception.metrics import score_mask
 from cablesim.perception.pipeline import compute_statistics, masks_from_statistics
 from cablesim.perception.votes import vote_image
+from cablesim.policies.perturb import PerturbConfig, PerturbedWorld
 
 METHODS = ("correlation", "segmentation")
 

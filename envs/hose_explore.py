@@ -55,12 +55,12 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from cablesim.policies.perturb import PerturbConfig
 from gymnasium import spaces
 
 from cablesim.config import pretty, to_dict
 from cablesim.episode.config import EpisodeConfig
 from cablesim.errors import CablesimError
+from cablesim.policies.perturb import PerturbConfig
 
 PRIMITIVES = ("grasp", "push")
 
@@ -157,12 +157,11 @@ class HoseExploreEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        from cablesim.policies.merge import VoteMerger
-        from cablesim.policies.perturb import PerturbedWorld
-
         from cablesim.episode.picker import pick_segment
         from cablesim.errors import UnreachableError
         from cablesim.perception.flow import DISFlow
+        from cablesim.policies.merge import VoteMerger
+        from cablesim.policies.perturb import PerturbedWorld
         from cablesim.robot.sim_panda import SimPanda
         from cablesim.sim.camera import SimCamera
 
@@ -208,11 +207,10 @@ class HoseExploreEnv(gym.Env):
     def step(
         self, action: dict[str, Any]
     ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        from cablesim.policies.explore import scores_dict
-        from cablesim.policies.merge import warp_votes
-
         from cablesim.episode.runner import run_episode
         from cablesim.perception.pipeline import segment_stream
+        from cablesim.policies.explore import scores_dict
+        from cablesim.policies.merge import warp_votes
 
         if self._pw is None:
             raise CablesimError("call reset() before step()")

@@ -113,6 +113,12 @@ class ExplorationResult:
     stop_reason: str = ""
     perturbations: list[dict[str, Any]] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    # SPEC section 7 grades of every proposal: the executed ones and those the robot's
+    # reachability check turned down (graded ``correct_unreachable`` when on the hose)
+    proposal_grades: dict[str, int] = field(default_factory=dict)
+
+    def grade(self, grade: str) -> None:
+        self.proposal_grades[grade] = self.proposal_grades.get(grade, 0) + 1
 
     @property
     def successes(self) -> list[Interaction]:
@@ -135,6 +141,7 @@ class ExplorationResult:
             "perturb": self.config.perturb.enabled,
             "interactions": [i.to_dict() for i in self.interactions],
             "successful_interactions": len(self.successes),
+            "proposal_grades": dict(sorted(self.proposal_grades.items())),
             "merged": self.merged,
             "stop_reason": self.stop_reason,
             "perturbations": self.perturbations,
@@ -175,6 +182,9 @@ class ExplorationResult:
                 f"{self.config.merged_votes}){'':<7} {m['precision']:6.3f} {m['recall']:6.3f} "
                 f"{m['f0.4']:6.3f} {m['iou']:6.3f}"
             )
+        if self.proposal_grades:
+            grades = ", ".join(f"{k} {v}" for k, v in sorted(self.proposal_grades.items()))
+            lines.append(f"proposals graded: {grades}")
         lines.append(f"stopped: {self.stop_reason}")
         return "\n".join(lines)
 
@@ -342,6 +352,8 @@ def explore(
             k = len(result.interactions)
             labels_now = camera.render_labels()
             grade = grade_proposal(segment, labels_now, hose, True)
+            if source != "start":
+                result.grade(grade)
             say(f"interaction {k} ({source}, {grade}): {cfg.kind} on {int(segment.sum())} px")
             t0 = time.perf_counter()
             ep = run_episode(pw, robot, camera, segment, ep_cfg)
@@ -435,6 +447,15 @@ def explore(
                 sr = sampler.propose(merger.votes, depth, K)
                 nxt = None if sr.proposal is None else sr.proposal.mask
                 source = "sampler"
+                unreachable = [
+                    c
+                    for c in sr.candidates
+                    if (c.rejected or "").startswith("unreachable") and c.mask.any()
+                ]
+                if unreachable:
+                    labels_now = camera.render_labels()  # ground truth, for grading only
+                    for c in unreachable:
+                        result.grade(grade_proposal(c.mask, labels_now, hose, False))
                 if sr.proposal is None:
                     say(f"grasp sampler: no proposal ({sr.rejections()})")
             if nxt is None:

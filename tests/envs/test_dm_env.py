@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import dm_env
 import numpy as np
-from cablesim.envs import HoseExploreConfig
-from cablesim.envs.dm import DmEnvAdapter
 
 import cablesim  # noqa: F401  (headless GL before mujoco)
+from cablesim.envs import HoseExploreConfig
+from cablesim.envs.dm import DmEnvAdapter
 
 TINY = HoseExploreConfig(scene_seed=2, hoses=2, width=160, height=120, budget=1, periods=1)
 

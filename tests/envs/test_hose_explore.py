@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import math
 
-import cablesim.envs  # noqa: F401  (registers the environment)
 import gymnasium as gym
 import numpy as np
 import pytest
-from cablesim.envs import ENV_ID, HoseExploreConfig, HoseExploreEnv
 from gymnasium.utils.env_checker import check_env
 
 import cablesim  # noqa: F401  (headless GL before mujoco)
+import cablesim.envs  # noqa: F401  (registers the environment)
+from cablesim.envs import ENV_ID, HoseExploreConfig, HoseExploreEnv
 
 TINY = HoseExploreConfig(scene_seed=2, hoses=2, width=160, height=120, budget=2, periods=1)
 

@@ -32,6 +32,10 @@ def test_cli_explore_tiny(tmp_path, capsys):
         assert s["precision"] > 0.5  # oracle flow: the grasped hose, not its neighbours
     assert metrics["merged"]["f0.4"] > 0.3
     assert metrics["perturbations"], "the neighbours were not perturbed"
+    grades = metrics["proposal_grades"]
+    assert set(grades) <= {"correct_reachable", "correct_unreachable", "wrong_hose", "background"}
+    executed = sum(1 for i in metrics["interactions"] if i["source"] != "start")
+    assert sum(grades.values()) >= executed
     for name in ("start.png", "interaction0_votes.png", "interaction0_flow.png", "merged.png"):
         assert (out / name).stat().st_size > 0, name
     video = out / "episode.mp4"
