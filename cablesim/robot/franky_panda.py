@@ -42,7 +42,7 @@ import mujoco
 import numpy as np
 
 from cablesim.robot.base import Frame, MoveResult, Robot
-from cablesim.robot.ik import ArmModel, IKResult, Obstacle
+from cablesim.robot.ik import ArmModel, ArmModelChecks, Obstacle
 from cablesim.robot.pose import Pose
 from cablesim.sim.panda import HAND_OFFSET, MAX_OPENING, TCP_OFFSET
 
@@ -78,7 +78,7 @@ def _column_major(T: np.ndarray) -> list[float]:
     return [float(v) for v in np.asarray(T, dtype=float).T.reshape(16)]
 
 
-class FrankyPanda(Robot):
+class FrankyPanda(ArmModelChecks, Robot):
     """The :class:`Robot` interface on a real Panda (or FR3) through franky-control.
 
     ``host``: the robot's FCI address.  ``T_world_camera``: camera extrinsics (4x4, OpenCV
@@ -189,25 +189,6 @@ class FrankyPanda(Robot):
         return Pose.from_matrix(self._T_base_world @ pose.matrix())
 
     # ---- planning (the same arm-only model as the simulated robot) ---------------------------
-    def solve_ik(self, pose: Pose, seeds: Sequence[np.ndarray] | None = None) -> np.ndarray | None:
-        ok, _, result = self._reachable(pose, seeds)
-        return result.q if ok and result is not None else None
-
-    def check_reachable(self, pose: Pose) -> tuple[bool, str]:
-        ok, reason, _ = self._reachable(pose, None)
-        return ok, reason
-
-    def _reachable(
-        self, pose: Pose, seeds: Sequence[np.ndarray] | None
-    ) -> tuple[bool, str, IKResult | None]:
-        if seeds is None:
-            seeds = self.arm.seeds(pose, self.joint_positions)
-        return self.arm.reach(pose, seeds, self._opening_for_checks())
-
-    def _opening_for_checks(self) -> float:
-        opening = self.gripper_opening
-        return opening if math.isfinite(opening) else MAX_OPENING
-
     def check_line(self, target: Pose) -> str:
         """Empty if IK follows the straight TCP line to ``target`` within limits, free of
         collisions and without branch jumps (from the current joints); else the reason."""

@@ -19,6 +19,7 @@ from cablesim.robot.pose import Pose
 from cablesim.sim.panda import (
     HOME_QPOS,
     JOINT_LIMITS,
+    MAX_OPENING,
     PandaNames,
     attach_panda,
     joint_qpos_addresses,
@@ -304,3 +305,33 @@ class ArmModel:
             a, b, dist = hits[0]
             return f"collision: {a} with {b} (penetration {-dist * 1000:.1f} mm)"
         return ""
+
+
+class ArmModelChecks:
+    """``solve_ik`` and ``check_reachable`` of the ``Robot`` interface on an ``ArmModel``
+    (``self.arm``), so the simulated and the real Panda judge reachability alike."""
+
+    arm: ArmModel
+    joint_positions: np.ndarray
+    gripper_opening: float
+
+    def solve_ik(self, pose: Pose, seeds: Sequence[np.ndarray] | None = None) -> np.ndarray | None:
+        """Arm joints of a collision-free IK solution within limits for ``pose``, or None."""
+        ok, _, result = self._reachable(pose, seeds)
+        return result.q if ok and result is not None else None
+
+    def check_reachable(self, pose: Pose) -> tuple[bool, str]:
+        ok, reason, _ = self._reachable(pose, None)
+        return ok, reason
+
+    def _reachable(
+        self, pose: Pose, seeds: Sequence[np.ndarray] | None
+    ) -> tuple[bool, str, IKResult | None]:
+        if seeds is None:
+            seeds = self.arm.seeds(pose, self.joint_positions)
+        return self.arm.reach(pose, seeds, self._opening_for_checks())
+
+    def _opening_for_checks(self) -> float:
+        """The finger opening the collision checks assume (fully open when it is unknown)."""
+        opening = self.gripper_opening
+        return opening if math.isfinite(opening) else MAX_OPENING

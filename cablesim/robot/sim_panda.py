@@ -24,7 +24,7 @@ import numpy as np
 
 from cablesim.errors import ConfigError
 from cablesim.robot.base import MoveResult, Robot
-from cablesim.robot.ik import ArmModel, IKResult, Obstacle, static_obstacles
+from cablesim.robot.ik import ArmModel, ArmModelChecks, Obstacle, static_obstacles
 from cablesim.robot.pose import Pose
 from cablesim.sim.panda import (
     JOINT_LIMITS,
@@ -102,7 +102,7 @@ def min_jerk(s: float) -> float:
     return s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
 
 
-class SimPanda(Robot):
+class SimPanda(ArmModelChecks, Robot):
     """The :class:`Robot` interface on a Panda attached to a simulated world."""
 
     def __init__(
@@ -158,22 +158,6 @@ class SimPanda(Robot):
         return float(self.world.model.opt.timestep)
 
     # ---- planning ----------------------------------------------------------------------------
-    def solve_ik(self, pose: Pose, seeds: Sequence[np.ndarray] | None = None) -> np.ndarray | None:
-        """Arm joints of a collision-free IK solution within limits for ``pose``, or None."""
-        ok, _, result = self._reachable(pose, seeds)
-        return result.q if ok and result is not None else None
-
-    def check_reachable(self, pose: Pose) -> tuple[bool, str]:
-        ok, reason, _ = self._reachable(pose, None)
-        return ok, reason
-
-    def _reachable(
-        self, pose: Pose, seeds: Sequence[np.ndarray] | None
-    ) -> tuple[bool, str, IKResult | None]:
-        if seeds is None:
-            seeds = self.arm.seeds(pose, self.joint_positions)
-        return self.arm.reach(pose, seeds, self.gripper_opening)
-
     def plan_line(self, target: Pose) -> tuple[list[np.ndarray], str]:
         """Joint waypoints along the straight TCP line to ``target``; empty list + reason on failure."""
         cfg = self.config
