@@ -25,10 +25,7 @@ from pathlib import Path
 from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
 
 import cablesim  # noqa: F401  (selects the headless GL back end)
-from cablesim.episode.config import EpisodeConfig
-from cablesim.episode.picker import pick_segment
-from cablesim.episode.runner import run_episode
-from cablesim.sim.layout import rng_streams
+from cablesim.sim.session import EpisodeConfig, SimSession
 
 RESULTS = Path(__file__).parent / "results" / "episode.md"
 
@@ -47,28 +44,21 @@ def main() -> int:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
         pinned = True
 
-    from cablesim.robot.sim_panda import SimPanda
-    from cablesim.sim.camera import SimCamera
-    from cablesim.sim.world import World
-
     cfg = EpisodeConfig(seed=args.seed, hose=args.hose)
-    t0 = time.perf_counter()
-    world = World.build(cfg.scene_config())
-    build = time.perf_counter() - t0
-    robot = SimPanda(world)
-    camera = SimCamera(world)
-    rng = rng_streams(cfg.seed)["episode"]
-    hose = cfg.hose if cfg.hose is not None else int(rng.integers(len(world.hoses)))
-    cfg = cfg.replace(hose=hose)
-    segment = pick_segment(world, robot, camera, hose, rng, cfg)
-    print(f"scene built in {build:.1f} s; hose {hose}, segment {int(segment.mask.sum())} px")
+    session = SimSession.build(cfg)
+    segment = session.pick_start()
+    hose = session.hose
+    print(
+        f"scene built in {session.build_time:.1f} s; hose {hose}, "
+        f"segment {int(segment.mask.sum())} px"
+    )
 
     runs = []
     for i in range(args.repeats):
-        world.reset()
-        robot.open()
+        session = SimSession.build(cfg, world=session.world, camera=session.camera)
+        session.hose = hose
         t = time.perf_counter()
-        res = run_episode(world, robot, camera, segment.mask, cfg)
+        res = session.interact(segment.mask)
         wall = time.perf_counter() - t
         if not res.success:
             print(f"run {i}: FAILED: {res.reason}")
@@ -93,7 +83,7 @@ def main() -> int:
             f"{len(res.stream)} frames kept of {res.details.get('ticks')} camera ticks; "
             f"gains {', '.join(f'{g:.3f}' for g in runs[-1]['gains'])}"
         )
-    camera.close()
+    session.close()
 
     def med(k: str) -> float:
         return statistics.median(r[k] for r in runs)

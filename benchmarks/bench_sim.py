@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import os
 
-import cablesim  # first: selects the headless OpenGL back end before mujoco is imported
-
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
@@ -52,12 +50,8 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=20, help="rendered frames per repeat")
     args = ap.parse_args()
     cv2.setNumThreads(1)
-    robot = Path(cablesim.__file__).parent.joinpath("sim", "panda.py").exists()
     cfg = SceneConfig(seed=0)
-    cfg.robot.enabled = robot
-    print(
-        f"[bench] building the default scene (4 hoses, arm {'on' if robot else 'off'})", flush=True
-    )
+    print("[bench] building the default scene (4 hoses, arm on)", flush=True)
     world = World.build(cfg)
     m, d = world.model, world.data
     dt = m.opt.timestep
@@ -131,8 +125,7 @@ def main() -> None:
         "(BLAS/OpenMP/OpenCV threads pinned to 1; MuJoCo single-threaded)",
         f"- mujoco {mujoco.__version__}, MUJOCO_GL={os.environ.get('MUJOCO_GL')}, "
         f"numpy {np.__version__}",
-        f"- scene: seed 0, 4 hoses, arm {'on' if robot else 'off (cablesim/sim/panda.py missing)'}"
-        f", nq={m.nq}, nv={m.nv}, timestep {dt} s",
+        f"- scene: seed 0, 4 hoses, arm on, nq={m.nq}, nv={m.nv}, timestep {dt} s",
         f"- image 640x480 (camera default); medians over {args.repeats} repeats "
         f"({args.steps} physics steps, {args.frames} frames each)",
         f"- GT flow case: hose 0 pulled 0.3 s through physics; {moving} hose/robot pixels in "

@@ -2,7 +2,7 @@
 
 For each seed: the default scene, one grasp interaction on a seeded start segment (two actions,
 K_p = 3) while the other hoses are pulled by the seeded perturbation of
-``cablesim.policies.perturb`` (and, with ``--also-unperturbed``, the same without it); the
+``cablesim.sim.perturb`` (and, with ``--also-unperturbed``, the same without it); the
 stream is segmented with ground-truth (oracle) flow by both methods at the SPEC's beta = 0.4
 thresholds, union of the two actions, and scored against the grasped hose's ground-truth mask
 in the target frame.  Writes ``benchmarks/results/methods.md``.
@@ -22,33 +22,21 @@ from pathlib import Path
 import numpy as np
 
 import cablesim  # noqa: F401  (headless GL before mujoco)
-from cablesim.episode.config import EpisodeConfig
 from cablesim.perception.metrics import score_mask
 from cablesim.perception.pipeline import compute_statistics, masks_from_statistics
 from cablesim.perception.votes import vote_image
-from cablesim.policies.perturb import PerturbConfig, PerturbedWorld
+from cablesim.sim.perturb import PerturbConfig
+from cablesim.sim.session import EpisodeConfig, SimSession
 
 METHODS = ("correlation", "segmentation")
 
 
 def run_seed(seed: int, perturb: bool, flow: str) -> dict:
-    from cablesim.episode.picker import pick_segment
-    from cablesim.episode.runner import run_episode
-    from cablesim.robot.sim_panda import SimPanda
-    from cablesim.sim.camera import SimCamera
-    from cablesim.sim.layout import rng_streams
-    from cablesim.sim.world import World
-
-    cfg = EpisodeConfig(seed=seed)
-    world = World.build(cfg.scene_config())
-    world.reset()
-    rng = rng_streams(seed)["episode"]
-    hose = int(rng.integers(len(world.hoses)))
-    pw = PerturbedWorld(world, PerturbConfig(enabled=perturb), hose_of_interest=hose, seed=seed)
-    robot, camera = SimPanda(pw), SimCamera(pw)
+    session = SimSession.build(EpisodeConfig(seed=seed, perturb=PerturbConfig(enabled=perturb)))
     try:
-        seg = pick_segment(pw, robot, camera, hose, rng, cfg)
-        res = run_episode(pw, robot, camera, seg.mask, cfg.replace(hose=hose))
+        seg = session.pick_start()
+        hose = session.hose
+        res = session.interact(seg.mask)
         if not res.success:
             return {"seed": seed, "perturb": perturb, "error": res.reason}
         stream = res.stream
@@ -66,7 +54,7 @@ def run_seed(seed: int, perturb: bool, flow: str) -> dict:
             row[m] = (s.precision, s.recall, s.f[0.4], s.iou)
         return row
     finally:
-        camera.close()
+        session.close()
 
 
 def table(rows: list[dict], perturb: bool) -> list[str]:

@@ -6,10 +6,12 @@
     obs, info = env.reset(seed=0)
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
 
-Each episode: the scene ``config.scene_seed`` (fixed; ``randomize_scene=True`` uses the reset
-seed as scene seed instead) is reset to its settled state; the reset seed draws the hose of
-interest and a visible, graspable start segment of it (the stand-in for a person's click, given
-to the agent as ``obs["segment"]``).  Every step is one interaction with the hose.
+Each episode is a simulated session (:class:`~cablesim.sim.session.SimSession`): the scene
+``config.scene_seed`` (fixed; ``randomize_scene=True`` uses the episode seed as scene seed
+instead) is reset to its settled state; an episode seed drawn from the reset seed names the
+random streams (:mod:`cablesim.seeding`) that draw the hose of interest and a visible,
+graspable start segment of it (the stand-in for a person's click, given to the agent as
+``obs["segment"]``) and the neighbour perturbation.  Every step is one interaction.
 
 **Action** ``Dict``:
 
@@ -30,13 +32,15 @@ depth), from which the episode runner estimates the grasp centre and axis from d
 - ``depth``: float32 (H, W), metres, 0 = invalid, clipped to [0, 10];
 - ``votes``: uint8 (H, W), merged votes for the hose of interest so far, in the current image
   (each successful interaction adds up to one vote per action; earlier votes are carried into
-  the latest target frame as in :mod:`cablesim.policies.merge`);
+  the latest target frame as in :mod:`cablesim.policies.merge`, with DIS flow by default or,
+  with ``merge="oracle"``, the simulator's exact flow);
 - ``segment``: uint8 (H, W), the start segment (1 on it), carried along like the votes;
 - ``gripper``: float32 (4,), TCP position in the camera frame (m) and finger opening (m).
 
 **Reward**: the gain in F_0.4 of the merged mask (``votes >= merged_votes``) of the hose of
 interest against ground truth, current image (so a failed or useless interaction gives 0 or a
-negative reward when the scene moved).  **Termination**: never; **truncation** after
+negative reward when the scene moved); computed by :mod:`cablesim.evaluation`, the only place
+the environment reads ground truth.  **Termination**: never; **truncation** after
 ``budget`` interactions.  ``info``: ``hose``, ``success``, ``reason``, ``interactions``,
 ``merged`` (precision, recall, f0.4, iou, pixels) and, after a successful interaction,
 ``scores`` (its own mask in its own target frame).  ``info`` holds no timings, so a seeded
@@ -58,9 +62,9 @@ import numpy as np
 from gymnasium import spaces
 
 from cablesim.config import pretty, to_dict
-from cablesim.episode.config import EpisodeConfig
 from cablesim.errors import CablesimError
-from cablesim.policies.perturb import PerturbConfig
+from cablesim.sim.perturb import PerturbConfig
+from cablesim.sim.session import EpisodeConfig
 
 PRIMITIVES = ("grasp", "push")
 
@@ -70,28 +74,33 @@ class HoseExploreConfig:
     """Scene, image size, budget and perception of :class:`HoseExploreEnv`."""
 
     scene_seed: int = 0
-    randomize_scene: bool = False  # True: the reset seed is the scene seed (slower resets)
+    randomize_scene: bool = False  # True: the episode seed is the scene seed (slower resets)
     hoses: int = 4
     width: int = 160
     height: int = 120
     budget: int = 3  # interactions per episode
     periods: int = 2  # K_p of each action (the thesis uses 3; 2 keeps steps short)
     flow: str = "oracle"  # "oracle" | "dis" | "farneback"; small images favour the oracle
+    merge: str = "dis"  # how votes are carried between images: "dis" | "oracle" | "none"
     grasp_method: str = "correlation"
     push_method: str = "segmentation"
     merged_votes: int = 1
     segment_length: float = 0.04  # m, the line segment made from (point, angle)
-    hose: int | None = None  # None: drawn from the reset seed
+    hose: int | None = None  # None: drawn from the episode seed
     perturb: PerturbConfig = field(default_factory=PerturbConfig)
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
 
     def episode_config(self, seed: int) -> EpisodeConfig:
-        ep = dataclasses.replace(self.episode, seed=seed, progress=False)
+        """The session of an episode: the scene of ``seed`` at the env's size and hose count."""
+        ep = dataclasses.replace(self.episode, seed=seed, hose=self.hose, progress=False)
         scene = dataclasses.replace(ep.scene, seed=seed)
         scene.hoses = dataclasses.replace(scene.hoses, count=self.hoses)
         scene.camera = dataclasses.replace(scene.camera, width=self.width, height=self.height)
-        actions = dataclasses.replace(ep.actions, periods=self.periods)
-        return dataclasses.replace(ep, scene=scene, actions=actions).validate()
+        actions = dataclasses.replace(ep.interaction.actions, periods=self.periods)
+        interaction = dataclasses.replace(ep.interaction, actions=actions)
+        return dataclasses.replace(
+            ep, scene=scene, interaction=interaction, perturb=self.perturb
+        ).validate()
 
     def __str__(self) -> str:
         return pretty(self)
@@ -126,107 +135,93 @@ class HoseExploreEnv(gym.Env):
                 "gripper": spaces.Box(-10.0, 10.0, (4,), np.float32),
             }
         )
-        self._world: Any = None
+        self._world: Any = None  # the scene, built once per scene seed
         self._world_seed: int | None = None
         self._camera: Any = None
-        self._pw: Any = None
-        self._robot: Any = None
+        self._session: Any = None
+        self._evaluator: Any = None
         self._merger: Any = None
         self._segment: np.ndarray | None = None
         self._image: Any = None
-        self._hose = 0
-        self._f = 0.0
+        self._merged: dict[str, float] = {}
         self._count = 0
-        self._ep_cfg: EpisodeConfig | None = None
         self._prev_snap: Any = None
         self._dis: Any = None
 
     # ------------------------------------------------------------------ set-up
-    def _ensure_world(self, scene_seed: int) -> None:
+    def _scene(self, scene_seed: int) -> tuple[Any, Any]:
+        """The world (and camera) of ``scene_seed``, built once and reused across resets."""
         from cablesim.sim.world import World
 
-        if self._world is not None and self._world_seed == scene_seed:
-            return
-        if self._camera is not None:
-            self._camera.close()
-        self._ep_cfg = self.config.episode_config(scene_seed)
-        self._world = World.build(self._ep_cfg.scene_config())
-        self._world_seed = scene_seed
-        self._camera = None
+        if self._world is None or self._world_seed != scene_seed:
+            if self._camera is not None:
+                self._camera.close()
+                self._camera = None
+            self._world = World.build(self.config.episode_config(scene_seed).scene_config())
+            self._world_seed = scene_seed
+        return self._world, self._camera
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        from cablesim.episode.picker import pick_segment
         from cablesim.errors import UnreachableError
         from cablesim.perception.flow import DISFlow
         from cablesim.policies.merge import VoteMerger
-        from cablesim.policies.perturb import PerturbedWorld
-        from cablesim.robot.sim_panda import SimPanda
-        from cablesim.sim.camera import SimCamera
+        from cablesim.sim.session import SimSession
 
         super().reset(seed=seed)
         cfg = self.config
         episode_seed = int(self.np_random.integers(2**31 - 1))
         scene_seed = episode_seed if cfg.randomize_scene else cfg.scene_seed
-        self._ensure_world(scene_seed)
-        world = self._world
-        world.reset()
-        rng = np.random.default_rng(episode_seed)
-        order = [cfg.hose] if cfg.hose is not None else list(rng.permutation(len(world.hoses)))
-        self._pw = PerturbedWorld(world, cfg.perturb, seed=episode_seed)
-        self._robot = SimPanda(self._pw)  # fresh: no IK warm start carried between episodes
-        if self._camera is None:
-            self._camera = SimCamera(self._pw)
-        else:
-            self._camera.world = self._pw
+        world, camera = self._scene(scene_seed)
+        # a reused world: the session's seed names only the episode's random streams
+        session = SimSession.build(cfg.episode_config(episode_seed), world=world, camera=camera)
+        self._session, self._camera = session, session.camera
+        n = len(world.hoses)
+        order = [cfg.hose] if cfg.hose is not None else list(session.rng.permutation(n))
         picked, reasons = None, []
         for hose in order:
             try:
-                picked = pick_segment(
-                    self._pw, self._robot, self._camera, int(hose), rng, self._ep_cfg
-                )
+                picked = session.pick_start(int(hose))
                 break
             except UnreachableError as e:
                 reasons.append(str(e))
         if picked is None:
             raise CablesimError("no hose has a graspable start segment: " + "; ".join(reasons))
-        self._hose = picked.hose
-        self._pw.set_hose_of_interest(self._hose)
+        self._evaluator = session.evaluator()
         self._segment = picked.mask.astype(np.int16)
         self._merger = VoteMerger(None)  # flows are passed explicitly
-        self._prev_snap = self._camera.snapshot() if cfg.flow == "oracle" else None
+        self._prev_snap = self._evaluator.snapshot() if cfg.merge == "oracle" else None
         self._dis = DISFlow()
         self._count = 0
-        self._image = self._camera.capture()
-        self._f = 0.0
-        info = {"hose": self._hose, "interactions": 0, "merged": self._merged_scores()}
+        self._image = session.capture()
+        self._merged = self._merged_scores()
+        info = {"hose": session.hose, "interactions": 0, "merged": self._merged}
         return self._obs(), info
 
     # ------------------------------------------------------------------ step
     def step(
         self, action: dict[str, Any]
     ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        from cablesim.episode.runner import run_episode
+        from cablesim.evaluation import f04_reward
         from cablesim.perception.pipeline import segment_stream
-        from cablesim.policies.explore import scores_dict
         from cablesim.policies.merge import warp_votes
 
-        if self._pw is None:
+        if self._session is None:
             raise CablesimError("call reset() before step()")
-        cfg = self.config
+        cfg, session = self.config, self._session
         primitive = PRIMITIVES[int(action["primitive"])]
         segment = self._line_segment(action)
-        info: dict[str, Any] = {"hose": self._hose, "primitive": primitive}
-        ep_cfg = self._ep_cfg.replace(kind=primitive, hose=self._hose)  # type: ignore[union-attr]
+        info: dict[str, Any] = {"hose": session.hose, "primitive": primitive}
+        interaction = session.cfg.interaction.replace(kind=primitive)
         if segment is None:
             ok, reason, stream = False, "no valid depth at the point", None
         else:
-            r = run_episode(self._pw, self._robot, self._camera, segment, ep_cfg)
+            r = session.interact(segment, interaction)
             ok, reason, stream = r.success, r.reason, r.stream
         self._count += 1
         scores: dict[str, float] | None = None
-        now = self._camera.capture()
+        now = session.capture()
         flow = self._flow_to_previous(now.rgb)
         if flow is not None:
             self._segment = warp_votes(self._segment, flow)
@@ -234,14 +229,13 @@ class HoseExploreEnv(gym.Env):
             method = cfg.grasp_method if primitive == "grasp" else cfg.push_method
             seg = segment_stream(stream, method=method, flow=cfg.flow, pipelined=False)
             self._merger.add(now.rgb, seg.votes, flow)
-            truth = stream.target.truth.labels == self._hose
-            scores = scores_dict(seg.mask(1), truth)
+            scores = self._evaluator.score(seg.mask(1), self._evaluator.stream_truth(stream))
         else:
             self._merger.retarget(now.rgb, flow)
         self._image = now
         merged = self._merged_scores()
-        reward = float(merged["f0.4"] - self._f)
-        self._f = float(merged["f0.4"])
+        reward = f04_reward(self._merged, merged)
+        self._merged = merged
         info.update(success=bool(ok), reason=reason, interactions=self._count, merged=merged)
         if scores is not None:
             info["scores"] = scores
@@ -273,26 +267,23 @@ class HoseExploreEnv(gym.Env):
         return mask if mask.sum() >= 5 else None
 
     def _flow_to_previous(self, new_rgb: np.ndarray) -> np.ndarray | None:
-        """Flow from the new image to the previous one (new(p) = previous(p + f)): the
-        simulator's exact flow in the oracle configuration, else DIS (ground-truth free)."""
-        if self.config.flow != "oracle":
-            return self._dis.compute(new_rgb, self._image.rgb)
-        from cablesim.sim.flow_gt import gt_flow
-
-        snap = self._camera.snapshot()
-        prev, self._prev_snap = self._prev_snap, snap
-        if prev is None:
+        """Flow from the new image to the previous one (new(p) = previous(p + f)): DIS
+        (ground-truth free) by default, the simulator's exact flow with ``merge="oracle"``,
+        none with ``merge="none"``."""
+        if self.config.merge == "none":
             return None
-        flow, valid = gt_flow(snap, prev)[:2]
-        return np.where(valid[..., None], flow, 0.0).astype(np.float32)
+        if self.config.merge != "oracle":
+            return self._dis.compute(new_rgb, self._image.rgb)
+        snap = self._evaluator.snapshot()
+        prev, self._prev_snap = self._prev_snap, snap
+        return self._evaluator.flow_between(snap, prev)
 
     def _merged_scores(self) -> dict[str, float]:
-        from cablesim.policies.explore import scores_dict
-
-        truth = self._camera.render_labels() == self._hose
+        ev = self._evaluator
         if self._merger is None or self._merger.votes is None:
-            return scores_dict(np.zeros_like(truth), truth)
-        return scores_dict(self._merger.mask(self.config.merged_votes), truth)
+            truth = ev.current_mask()
+            return ev.score(np.zeros_like(truth), truth)
+        return ev.score(self._merger.mask(self.config.merged_votes))
 
     def _obs(self) -> dict[str, np.ndarray]:
         img = self._image
@@ -300,10 +291,9 @@ class HoseExploreEnv(gym.Env):
         votes = self._merger.votes if self._merger.votes is not None else None
         h, w = depth.shape
         v = np.zeros((h, w), np.uint8) if votes is None else np.clip(votes, 0, 255).astype(np.uint8)
-        T = np.asarray(self._camera.T_world_camera, float)
-        pos = self._robot.ee_pose().position
-        pos_cam = (pos - T[:3, 3]) @ T[:3, :3]
-        grip = np.array([*pos_cam, self._robot.gripper_opening], np.float32)
+        robot = self._session.robot
+        pos_cam = robot.ee_pose_camera().position
+        grip = np.array([*pos_cam, robot.gripper_opening], np.float32)
         return {
             "rgb": img.rgb.copy(),
             "depth": depth,
@@ -327,6 +317,7 @@ class HoseExploreEnv(gym.Env):
         if self._camera is not None:
             self._camera.close()
             self._camera = None
+        self._session = None
 
     def config_dict(self) -> dict[str, Any]:
         return to_dict(self.config)

@@ -4,15 +4,15 @@
     res = explore(ExploreConfig(seed=0, perturb=PerturbConfig(enabled=True)), out="runs/demo")
     print(res.summary())
 
-Modules: ``config`` (ExploreConfig), ``explore`` (the loop, the random-grasp and push
-baselines), ``merge`` (votes carried between target frames), ``perturb`` (seeded disturbance
-of neighbouring hoses during actions), ``report`` (pictures, video, metrics).
-Importing this package does not import MuJoCo; :func:`explore` does.
+Modules: ``config`` (ExploreConfig), ``explore`` (the loop over a simulated or real session,
+the random-grasp and push baselines), ``merge`` (votes carried between target frames),
+``report`` (pictures, video, metrics).
 """
+
+from cablesim.sim.perturb import PerturbConfig
 
 from .config import STRATEGIES, ExploreConfig
 from .merge import VoteMerger, warp_votes
-from .perturb import PerturbConfig
 
 __all__ = [
     "STRATEGIES",
@@ -24,7 +24,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):  # lazy: explore imports MuJoCo
+def __getattr__(name: str):  # lazy: explore builds simulations
     if name == "explore":
         from .explore import explore
 

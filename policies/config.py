@@ -4,10 +4,10 @@
     print(cfg)                                   # JSON; ExploreConfig.from_dict(...) rebuilds it
     cfg.episode_config()                         # the EpisodeConfig every interaction uses
 
-``seed`` is the one seed: it is the scene seed, draws the hose of interest (when ``hose`` is
-None) and the start segment from ``rng_streams(seed)["episode"]`` exactly as
-:func:`cablesim.episode.simulate.simulate_episode` does, and seeds the neighbour perturbation
-and the random-grasp baseline.
+``seed`` is the one seed: it is the scene seed, and its named streams (:mod:`cablesim.seeding`)
+draw the hose of interest (when ``hose`` is None) and the start segment (``episode``, exactly
+as :func:`cablesim.sim.session.simulate_episode` does), the neighbour perturbation
+(``perturb``) and the random-grasp baseline (``baseline``).
 """
 
 from __future__ import annotations
@@ -17,17 +17,16 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from cablesim.config import from_dict, pretty, to_dict
-from cablesim.episode.config import EpisodeConfig
 from cablesim.errors import ConfigError
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.grasp_sampler import GraspSamplerParams
 from cablesim.perception.segmentation import SegmentationParams
-
-from .perturb import PerturbConfig
+from cablesim.sim.perturb import PerturbConfig
+from cablesim.sim.session import EpisodeConfig
 
 STRATEGIES = ("sampler", "random", "push")
 FLOWS = ("dis", "oracle", "farneback", "raft")
-MERGES = ("auto", "dis", "oracle", "none")
+MERGES = ("dis", "oracle", "none")
 
 
 @dataclass
@@ -40,9 +39,9 @@ class ExploreConfig:
     method: ``correlation``, ``segmentation`` or ``ablation``; None = correlation for grasps,
     segmentation for pushes.
     merge: how votes of earlier interactions are carried into the latest target frame:
-    ``dis`` (DIS flow between the two target frames, ground-truth free), ``oracle``
-    (ground-truth flow between them), ``none`` (added in place), ``auto`` (oracle when
-    ``flow`` is oracle, else dis).
+    ``dis`` (DIS flow between the two target frames, ground-truth free; the default whatever
+    the flow back end), ``oracle`` (the simulator's exact flow between them, an explicit
+    ablation through the evaluation module), ``none`` (added in place).
     """
 
     seed: int = 0
@@ -52,7 +51,7 @@ class ExploreConfig:
     max_attempts: int = 6  # interactions tried in total (failed ones included)
     method: str | None = None
     flow: str = "dis"
-    merge: str = "auto"
+    merge: str = "dis"
     merged_votes: int = 1  # a pixel is in the merged mask with at least this many votes
     front_filter: bool = True  # keep the front-most part (depth) of a proposed segment
     random_tries: int = 30  # random baseline: voted pixels tried per proposal
@@ -75,15 +74,10 @@ class ExploreConfig:
             return self.method
         return "segmentation" if self.kind == "push" else "correlation"
 
-    @property
-    def resolved_merge(self) -> str:
-        if self.merge != "auto":
-            return self.merge
-        return "oracle" if self.flow == "oracle" else "dis"
-
     def episode_config(self) -> EpisodeConfig:
-        """The interaction config: the scene of ``seed`` at the chosen image size."""
-        ep = dataclasses.replace(self.episode, seed=self.seed, hose=self.hose, kind=self.kind)
+        """The simulated session: the scene of ``seed`` at the chosen image size, the
+        interaction of ``strategy`` and the perturbation."""
+        ep = self.episode
         scene = dataclasses.replace(ep.scene, seed=self.seed)
         cam = dataclasses.replace(scene.camera)
         if self.width is not None:
@@ -91,7 +85,16 @@ class ExploreConfig:
         if self.height is not None:
             cam.height = self.height
         scene = dataclasses.replace(scene, camera=cam)
-        return dataclasses.replace(ep, scene=scene, progress=False)
+        interaction = dataclasses.replace(ep.interaction, kind=self.kind)
+        return dataclasses.replace(
+            ep,
+            seed=self.seed,
+            hose=self.hose,
+            scene=scene,
+            interaction=interaction,
+            perturb=self.perturb,
+            progress=False,
+        )
 
     def validate(self) -> ExploreConfig:
         if not isinstance(self.seed, int) or self.seed < 0:

@@ -1,13 +1,13 @@
-"""The exploration policy of the thesis (chapter 6) and two baselines, in simulation.
+"""The exploration policy of the thesis (chapter 6) and two baselines.
 
     from cablesim.policies import ExploreConfig, explore
     res = explore(ExploreConfig(seed=0, grasps=3), out="runs/demo")
     print(res.summary())               # precision, recall, F_0.4, IoU per interaction and merged
 
 Loop (strategy ``sampler``): a start segment of the hose of interest (the seeded stand-in for a
-person clicking, :func:`~cablesim.episode.picker.pick_segment`) -> interaction
-(:func:`~cablesim.episode.runner.run_episode`: grasp, two periodic actions, retreat, target
-frame) -> segmentation of the stream (motion correlation by default) -> the votes are merged
+person clicking, :func:`~cablesim.sim.picker.pick_segment`) -> interaction
+(:func:`~cablesim.episode.runner.run_interaction`: grasp, two periodic actions, retreat,
+target frame) -> segmentation of the stream (motion correlation by default) -> the votes are merged
 with those of earlier interactions in the latest target frame (:class:`VoteMerger`) -> the
 grasp sampler proposes the next grasp on the merged votes; its reachability callback is the
 robot's ``check_reachable`` on the grasp and pre-grasp poses built from the proposal's
@@ -20,8 +20,10 @@ Baselines: ``random`` picks the next grasp at a random voted pixel (the voted pi
 gripper, pressed and back) and segments by motion segmentation.
 
 Neighbouring hoses can be disturbed on purpose during the actions (``config.perturb``, see
-:mod:`cablesim.policies.perturb`).  Ground truth is used for evaluation only (scores, grading
-of proposals) and by the start-segment picker.
+:mod:`cablesim.sim.perturb`).  Ground truth reaches the loop only through the evaluation module
+(:class:`~cablesim.evaluation.Evaluator`: scores, grades of proposals, the explicit ``oracle``
+merge); the start segment comes from the simulated session's picker.  The same loop
+(:class:`Exploration`) runs on a real session, which has no evaluator.
 """
 
 from __future__ import annotations
@@ -37,30 +39,19 @@ from scipy import ndimage
 
 from cablesim.config import to_dict
 from cablesim.errors import InputError
+from cablesim.evaluation import scores_dict
+from cablesim.jsonutil import jsonable
 from cablesim.perception.correlation import CorrelationParams
-from cablesim.perception.frames import Intrinsics
+from cablesim.perception.flow import make_flow
+from cablesim.perception.frames import Intrinsics, Stream
 from cablesim.perception.geometry import eccentricity, segment_pose
 from cablesim.perception.grasp_sampler import GraspSampler
-from cablesim.perception.metrics import grade_proposal, score_mask
 from cablesim.perception.pipeline import StreamSegmentation, segment_stream
+from cablesim.progress import Progress, Say, quiet
+from cablesim.seeding import stream
 
 from .config import ExploreConfig
 from .merge import VoteMerger, dis_target_flow
-
-Say = Callable[[str], None]
-
-
-def scores_dict(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
-    s = score_mask(pred, truth)
-    return {
-        "precision": s.precision,
-        "recall": s.recall,
-        "f0.4": s.f[0.4],
-        "f1": s.f[1.0],
-        "iou": s.iou,
-        "pixels": int(pred.sum()),
-        "truth_pixels": int(truth.sum()),
-    }
 
 
 @dataclass
@@ -136,7 +127,7 @@ class ExplorationResult:
             "strategy": self.config.strategy,
             "method": self.config.resolved_method,
             "flow": self.config.flow,
-            "merge": self.config.resolved_merge,
+            "merge": self.config.merge,
             "merged_votes_threshold": self.config.merged_votes,
             "perturb": self.config.perturb.enabled,
             "interactions": [i.to_dict() for i in self.interactions],
@@ -190,29 +181,16 @@ class ExplorationResult:
 
 
 # ---------------------------------------------------------------------- helpers
-def grasp_reachability(robot: Any, T_world_camera: np.ndarray, ep_cfg: Any) -> Callable:
-    """The sampler's reachability callback: the robot's ``check_reachable`` on the grasp and
-    pre-grasp poses built from a camera-frame (centre, axis), and on the action end points."""
+def grasp_reachability(robot: Any, T_world_camera: np.ndarray, cfg: Any) -> Callable:
+    """The sampler's reachability callback: :func:`~cablesim.episode.primitives.check_interaction`
+    on the grasp built from a camera-frame (centre, axis) of a proposal."""
     from cablesim.episode import primitives as prim
 
     T = np.asarray(T_world_camera, float)
-    approach = np.asarray(prim.DEFAULT_APPROACH, float)
 
     def reachable(centre_cam: np.ndarray, axis_cam: np.ndarray) -> tuple[bool, str]:
-        R, t = T[:3, :3], T[:3, 3]
-        ray = R @ (centre_cam / np.linalg.norm(centre_cam))
-        centre = R @ centre_cam + t + ep_cfg.grasp.surface_offset * ray
-        axis = R @ axis_cam
-        g, why = prim.choose_grasp_pose(robot, centre, axis, approach, ep_cfg.grasp.pregrasp_offset)
-        if g is None:
-            return False, why
-        if ep_cfg.kind == "grasp":
-            for label, u in prim.action_directions(ep_cfg.actions, axis, T, approach):
-                for s in (1.0, -1.0):
-                    ok, why = robot.check_reachable(g.translated(s * ep_cfg.actions.amplitude * u))
-                    if not ok:
-                        return False, f"action {label} end point: {why}"
-        return True, ""
+        centre = prim.grasp_centre(T, centre_cam, cfg.grasp.surface_offset)
+        return prim.check_interaction(robot, centre, T[:3, :3] @ axis_cam, cfg, T)
 
     return reachable
 
@@ -276,238 +254,240 @@ def front_segment(
     return keep if keep.sum() >= min_pixels else mask
 
 
-class _Progress:
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.t0 = time.perf_counter()
-
-    def __call__(self, msg: str) -> None:
-        if self.enabled:
-            print(f"[explore {time.perf_counter() - self.t0:6.1f}s] {msg}", flush=True)
-
-
 # ---------------------------------------------------------------------- the loop
+class Exploration:
+    """The exploration loop over a session (simulated or real): interactions on one hose,
+    segmentation, merged votes, next proposal.  ``evaluator`` (simulation only) scores and
+    grades; without one nothing is scored.  Call :meth:`run`."""
+
+    def __init__(
+        self,
+        session: Any,
+        cfg: ExploreConfig,
+        start_segment: np.ndarray,
+        start_image: Any,
+        evaluator: Any = None,
+        writer: Any = None,
+        say: Say = quiet,
+        flow_kwargs: dict[str, Any] | None = None,
+        sink_for: Callable[[int], Any] | None = None,
+    ) -> None:
+        self.session, self.cfg, self.ev, self.writer, self.say = (
+            session,
+            cfg,
+            evaluator,
+            writer,
+            say,
+        )
+        self.sink_for = sink_for
+        self.interaction_cfg = session.cfg.interaction if hasattr(session, "cfg") else None
+        self.T = np.asarray(session.T_world_camera, float)
+        self.flow = make_flow(cfg.flow, **(flow_kwargs or {}))
+        self.reachable = grasp_reachability(session.robot, self.T, self.interaction_cfg)
+        self.sampler = GraspSampler(cfg.sampler, reachability=self.reachable)
+        self.merger = VoteMerger(dis_target_flow() if cfg.merge == "dis" else None)
+        self.baseline_rng = stream(session.cfg.seed, "baseline")
+        self.params = _method_params(cfg)
+        hose = evaluator.hose if evaluator is not None else getattr(session, "hose", None)
+        self.result = ExplorationResult(cfg, hose, start_image.rgb, start_segment)
+        self.segment, self.source = start_segment, "start"
+        self.prev_snap = self._snapshot()
+        self.previous_centres: list[np.ndarray] = []
+        # the image the current segment lies in
+        self.depth, self.K = start_image.depth, start_image.intrinsics
+
+    def _snapshot(self) -> Any:
+        return self.ev.snapshot() if self.ev is not None and self.cfg.merge == "oracle" else None
+
+    def _oracle(self) -> np.ndarray | None:
+        """Exact flow from the new image to the previous one (``merge="oracle"`` only)."""
+        snap = self._snapshot()
+        flow = self.ev.flow_between(snap, self.prev_snap) if snap is not None else None
+        self.prev_snap = snap or self.prev_snap
+        return flow
+
+    def run(self) -> ExplorationResult:
+        cfg, res = self.cfg, self.result
+        while len(res.successes) < cfg.grasps and len(res.interactions) < cfg.max_attempts:
+            inter = self.attempt(len(res.interactions))
+            if self.writer is not None and not inter.success:
+                self.writer.failed(inter)
+            if len(res.successes) >= cfg.grasps:
+                res.stop_reason = f"budget of {cfg.grasps} interactions reached"
+                break
+            if len(res.interactions) >= cfg.max_attempts:
+                res.stop_reason = f"{cfg.max_attempts} attempts tried"
+                break
+            if self.merger.votes is None:
+                res.stop_reason = "the first interaction failed: no votes to propose from"
+                break
+            nxt = self.propose()
+            if nxt is None:
+                res.stop_reason = "no further reachable proposal"
+                break
+            self.segment = front_segment(nxt, self.depth) if cfg.front_filter else nxt
+        if not res.stop_reason:
+            res.stop_reason = "done"
+        return res
+
+    def attempt(self, k: int) -> Interaction:
+        """Interaction ``k`` on the current segment, then perception and merging."""
+        res, say = self.result, self.say
+        grade = self.ev.grade(self.segment, True) if self.ev is not None else None
+        if self.source != "start" and grade is not None:
+            res.grade(grade)
+        say(f"interaction {k} ({self.source}, {grade}): on {int(self.segment.sum())} px")
+        t0 = time.perf_counter()
+        sink = self.sink_for(k) if self.sink_for is not None else None
+        ep = self.session.interact(self.segment, self.interaction_cfg, sink=sink)
+        inter = Interaction(k, ep.success, ep.reason, self.source, self.segment, grade)
+        inter.timings["episode"] = time.perf_counter() - t0
+        inter.episode = {
+            "actions": [a.to_dict() for a in ep.actions],
+            "other_hoses_max_displacement_m": ep.other_hose_displacement(),
+            "details": jsonable(ep.details),
+        }
+        inter.grasped_hose = ep.hose
+        res.interactions.append(inter)
+        centre_cam = self._centre_in_camera(ep)
+        if not ep.success or ep.stream is None:
+            say(f"interaction {k} failed: {ep.reason}")
+            if centre_cam is not None:
+                self.sampler.add_grasp(centre_cam, self.segment, blacklist=True)
+            # the attempt may have moved things: carry the votes into the current image
+            now = self.session.capture()
+            self.merger.retarget(now.rgb, self._oracle())
+            self.depth, self.K = now.depth, now.intrinsics
+            return inter
+        self._perceive(inter, ep.stream)
+        if centre_cam is not None:
+            self.sampler.add_grasp(centre_cam, self.segment, blacklist=True)
+            self.previous_centres.append(centre_cam)
+        return inter
+
+    def _centre_in_camera(self, ep: Any) -> np.ndarray | None:
+        if ep.centre is not None:
+            T = self.T
+            return ((np.asarray(ep.centre)[None] - T[:3, 3]) @ T[:3, :3])[0]
+        try:  # failed before the runner estimated it: blacklist the segment all the same
+            return segment_pose(self.segment, self.depth, self.K).centre
+        except InputError:
+            return None
+
+    def _perceive(self, inter: Interaction, stream: Stream) -> None:
+        res, cfg = self.result, self.cfg
+        target = stream.target
+        t0 = time.perf_counter()
+        seg = segment_stream(stream, method=cfg.resolved_method, flow=self.flow, params=self.params)
+        inter.timings["perception"] = time.perf_counter() - t0
+        truth = self.ev.stream_truth(stream) if self.ev is not None else None
+        inter.seg, inter.target_rgb, inter.target_depth = seg, target.rgb, target.depth
+        inter.truth = truth
+        self.merger.add(target.rgb, seg.votes, self._oracle())
+        if truth is not None:
+            inter.scores = scores_dict(seg.mask(1), truth)
+            inter.merged = scores_dict(self.merger.mask(cfg.merged_votes), truth)
+            res.final_truth = truth
+        res.merged_votes = self.merger.votes
+        res.final_rgb = target.rgb
+        if inter.scores:
+            s, m = inter.scores, inter.merged
+            self.say(
+                f"interaction {inter.index}: P {s['precision']:.3f} R {s['recall']:.3f} "
+                f"F0.4 {s['f0.4']:.3f}; merged P {m['precision']:.3f} "
+                f"R {m['recall']:.3f} F0.4 {m['f0.4']:.3f}"
+            )
+        self.depth, self.K = target.depth, target.intrinsics
+        if self.writer is not None:
+            self.writer.interaction(inter, stream, self.merger.votes, self.flow)
+
+    def propose(self) -> np.ndarray | None:
+        """The next segment on the merged votes (``None``: no reachable proposal)."""
+        votes = self.merger.votes
+        assert votes is not None
+        if self.cfg.strategy == "random":
+            self.source = "random"
+            return random_segment(
+                votes,
+                self.depth,
+                self.K,
+                self.baseline_rng,
+                self.reachable,
+                self.cfg.random_tries,
+                previous=self.previous_centres,
+            )
+        self.source = "sampler"
+        sr = self.sampler.propose(votes, self.depth, self.K)
+        if self.ev is not None:  # grade the candidates the robot could not reach
+            unreachable = [
+                c
+                for c in sr.candidates
+                if (c.rejected or "").startswith("unreachable") and c.mask.any()
+            ]
+            if unreachable:
+                labels = self.ev.current_labels()
+                for c in unreachable:
+                    self.result.grade(self.ev.grade(c.mask, False, labels))
+        if sr.proposal is None:
+            self.say(f"grasp sampler: no proposal ({sr.rejections()})")
+            return None
+        return sr.proposal.mask
+
+
+def _method_params(cfg: ExploreConfig) -> Any:
+    method = cfg.resolved_method
+    if method == "segmentation":
+        return cfg.segmentation
+    if method == "ablation":
+        from cablesim.perception.correlation import AblationParams
+
+        return AblationParams()
+    return cfg.correlation
+
+
 def explore(
     config: ExploreConfig | None = None,
     out: str | Path | None = None,
     progress: Say | None = None,
     flow_kwargs: dict[str, Any] | None = None,
 ) -> ExplorationResult:
-    """Run one exploration (see the module docstring); with ``out`` write pictures, a video
-    and ``metrics.json`` there (:mod:`cablesim.policies.report`)."""
-    from cablesim.episode.picker import pick_segment
-    from cablesim.episode.runner import run_episode
-    from cablesim.robot.sim_panda import SimPanda
-    from cablesim.sim.camera import SimCamera
-    from cablesim.sim.layout import rng_streams
-    from cablesim.sim.world import World
+    """Run one simulated exploration (see the module docstring); with ``out`` write pictures, a
+    video and ``metrics.json`` there (:mod:`cablesim.policies.report`)."""
+    from cablesim.sim.session import SimSession
 
-    from .perturb import PerturbedWorld
     from .report import ExplorationWriter
 
     cfg = (config or ExploreConfig()).validate()
-    say = progress or _Progress(cfg.progress)
-    ep_cfg = cfg.episode_config()
+    say = progress or Progress("explore", cfg.progress)
     t_start = time.perf_counter()
-    world = World.build(ep_cfg.scene_config())
-    world.reset()
-    streams = rng_streams(cfg.seed)
-    rng = streams["episode"]
-    hose = cfg.hose if cfg.hose is not None else int(rng.integers(len(world.hoses)))
-    ep_cfg = ep_cfg.replace(hose=hose)
-    pw = PerturbedWorld(world, cfg.perturb, hose_of_interest=hose, seed=cfg.seed)
-    robot = SimPanda(pw)
-    camera = SimCamera(pw)
-    T = np.asarray(camera.T_world_camera, float)
+    session = SimSession.build(cfg.episode_config())
     writer = ExplorationWriter(Path(out), cfg) if out is not None else None
-    build_s = time.perf_counter() - t_start
-    say(
-        f"scene seed {cfg.seed} ({len(world.hoses)} hoses, {camera.width}x{camera.height}) "
-        f"ready in {build_s:.1f} s; hose of interest {hose}"
-    )
+    w, h = session.camera.width, session.camera.height
     try:
-        start = camera.capture()
-        picked = pick_segment(pw, robot, camera, hose, rng, ep_cfg)
+        hose = session.draw_hose()
+        say(
+            f"scene seed {cfg.seed} ({len(session.world.hoses)} hoses, {w}x{h}) "
+            f"ready in {session.build_time:.1f} s; hose of interest {hose}"
+        )
+        start = session.capture()
+        picked = session.pick_start()
         say(f"start segment: {int(picked.mask.sum())} px at {picked.centre_px}")
-        result = ExplorationResult(cfg, hose, start.rgb, picked.mask)
-        result.timings["build"] = build_s
         if writer is not None:
             writer.start(start.rgb, picked.mask)
-        reachable = grasp_reachability(robot, T, ep_cfg)
-        sampler = GraspSampler(cfg.sampler, reachability=reachable)
-        merge = cfg.resolved_merge
-        merger = VoteMerger(dis_target_flow() if merge == "dis" else None)
-        base_rng = np.random.default_rng([cfg.seed, 0xBA5E])
-        method = cfg.resolved_method
-        params = cfg.segmentation if method == "segmentation" else cfg.correlation
-        if method == "ablation":
-            from cablesim.perception.correlation import AblationParams
-
-            params = AblationParams()
-        segment, source = picked.mask, "start"
-        prev_snap = camera.snapshot() if merge == "oracle" else None
-        previous_centres: list[np.ndarray] = []
-        depth, K = start.depth, start.intrinsics  # the image the current segment lies in
-        while len(result.successes) < cfg.grasps and len(result.interactions) < cfg.max_attempts:
-            k = len(result.interactions)
-            labels_now = camera.render_labels()
-            grade = grade_proposal(segment, labels_now, hose, True)
-            if source != "start":
-                result.grade(grade)
-            say(f"interaction {k} ({source}, {grade}): {cfg.kind} on {int(segment.sum())} px")
-            t0 = time.perf_counter()
-            ep = run_episode(pw, robot, camera, segment, ep_cfg)
-            inter = Interaction(k, ep.success, ep.reason, source, segment, grade)
-            inter.timings["episode"] = time.perf_counter() - t0
-            inter.episode = {
-                "actions": [a.to_dict() for a in ep.actions],
-                "other_hoses_max_displacement_m": ep.other_hose_displacement(),
-            }
-            inter.grasped_hose = ep.hose
-            result.interactions.append(inter)
-            centre_cam = None
-            if ep.centre is not None:
-                centre_cam = world.world_to_camera(ep.centre[None])[0]
-            else:  # failed before the runner estimated it: blacklist the segment all the same
-                try:
-                    centre_cam = segment_pose(segment, depth, K).centre
-                except InputError:
-                    pass
-            if not ep.success or ep.stream is None:
-                say(f"interaction {k} failed: {ep.reason}")
-                if centre_cam is not None:
-                    sampler.add_grasp(centre_cam, segment, blacklist=True)
-                # the attempt may have moved things: carry the votes into the current image
-                now = camera.capture()
-                snap = camera.snapshot() if merge == "oracle" else None
-                merger.retarget(now.rgb, _oracle(snap, prev_snap))
-                prev_snap = snap or prev_snap
-                depth, K = now.depth, now.intrinsics
-            else:
-                stream = ep.stream
-                target = stream.target
-                t0 = time.perf_counter()
-                seg = segment_stream(
-                    stream,
-                    method=method,
-                    flow=_flow(cfg.flow, flow_kwargs),
-                    params=params,
-                )
-                inter.timings["perception"] = time.perf_counter() - t0
-                truth = target.truth.labels == hose if target.truth is not None else None
-                inter.seg, inter.target_rgb, inter.target_depth = seg, target.rgb, target.depth
-                inter.truth = truth
-                snap = camera.snapshot() if merge == "oracle" else None
-                merger.add(target.rgb, seg.votes, _oracle(snap, prev_snap))
-                prev_snap = snap
-                if truth is not None:
-                    inter.scores = scores_dict(seg.mask(1), truth)
-                    inter.merged = scores_dict(merger.mask(cfg.merged_votes), truth)
-                    result.final_truth = truth
-                inter.flow_example = _flow_example(stream, cfg.flow, flow_kwargs)
-                result.merged_votes = merger.votes
-                result.final_rgb = target.rgb
-                if centre_cam is not None:
-                    sampler.add_grasp(centre_cam, segment, blacklist=True)
-                    previous_centres.append(centre_cam)
-                if inter.scores:
-                    s, m = inter.scores, inter.merged
-                    say(
-                        f"interaction {k}: P {s['precision']:.3f} R {s['recall']:.3f} "
-                        f"F0.4 {s['f0.4']:.3f}; merged P {m['precision']:.3f} "
-                        f"R {m['recall']:.3f} F0.4 {m['f0.4']:.3f}"
-                    )
-                depth, K = target.depth, target.intrinsics
-                if writer is not None:
-                    writer.interaction(inter, stream, merger.votes)
-            if writer is not None and not inter.success:
-                writer.failed(inter)
-            if len(result.successes) >= cfg.grasps:
-                result.stop_reason = f"budget of {cfg.grasps} interactions reached"
-                break
-            if len(result.interactions) >= cfg.max_attempts:
-                result.stop_reason = f"{cfg.max_attempts} attempts tried"
-                break
-            # next segment on the merged votes
-            if merger.votes is None:
-                result.stop_reason = "the first interaction failed: no votes to propose from"
-                break
-            if cfg.strategy == "random":
-                nxt = random_segment(
-                    merger.votes,
-                    depth,
-                    K,
-                    base_rng,
-                    reachable,
-                    cfg.random_tries,
-                    previous=previous_centres,
-                )
-                source = "random"
-            else:
-                sr = sampler.propose(merger.votes, depth, K)
-                nxt = None if sr.proposal is None else sr.proposal.mask
-                source = "sampler"
-                unreachable = [
-                    c
-                    for c in sr.candidates
-                    if (c.rejected or "").startswith("unreachable") and c.mask.any()
-                ]
-                if unreachable:
-                    labels_now = camera.render_labels()  # ground truth, for grading only
-                    for c in unreachable:
-                        result.grade(grade_proposal(c.mask, labels_now, hose, False))
-                if sr.proposal is None:
-                    say(f"grasp sampler: no proposal ({sr.rejections()})")
-            if nxt is None:
-                result.stop_reason = "no further reachable proposal"
-                break
-            segment = front_segment(nxt, depth) if cfg.front_filter else nxt
-        if not result.stop_reason:
-            result.stop_reason = "done"
-        result.perturbations = list(pw.log)
+        run = Exploration(
+            session, cfg, picked.mask, start, session.evaluator(), writer, say, flow_kwargs
+        )
+        run.result.timings["build"] = session.build_time
+        result = run.run()
+        result.perturbations = list(session.perturbation.log)
         result.timings["total"] = time.perf_counter() - t_start
         if writer is not None:
             writer.finish(result)
         return result
     finally:
-        camera.close()
+        session.close()
         if writer is not None:
             writer.close()
-
-
-def _flow(name: str, kwargs: dict[str, Any] | None) -> Any:
-    from cablesim.perception.flow import make_flow
-
-    return make_flow(name, **(kwargs or {}))
-
-
-def _oracle(new_snap: Any, prev_snap: Any) -> np.ndarray | None:
-    """Ground-truth flow new -> previous target (new(p) = previous(p + f)), or None."""
-    if new_snap is None or prev_snap is None:
-        return None
-    from cablesim.sim.flow_gt import gt_flow
-
-    flow, valid = gt_flow(new_snap, prev_snap)[:2]
-    flow = np.where(valid[..., None], flow, 0.0).astype(np.float32)
-    return flow
-
-
-def _flow_example(
-    stream: Any, flow: str, kwargs: dict[str, Any] | None
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Flow of the kept frame farthest from the target (estimated, ground truth)."""
-    frames = [f for f in stream.frames if not f.is_target and f.truth is not None]
-    if not frames:
-        return None
-    target = stream.target
-    g1 = frames[0].gripper
-    f = max(frames, key=lambda fr: float(np.linalg.norm(fr.gripper - g1)))
-    est = _flow(flow, kwargs).frame_flow(f, target)
-    gt = f.truth.flow_to_target
-    if gt is None:
-        return None
-    gt = np.where(f.truth.flow_valid[..., None], gt, 0.0) if f.truth.flow_valid is not None else gt
-    return est, np.asarray(gt, np.float32)
 
 
 __all__ = [

@@ -23,6 +23,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from cablesim.jsonutil import json_default
 from cablesim.perception.frames import Stream
 
 GREEN = np.array([0, 255, 0], np.float32)
@@ -147,6 +148,22 @@ def count_video_frames(path: Path) -> int:
     return n
 
 
+def flow_example(stream: Stream, flow: Any) -> tuple[np.ndarray, np.ndarray] | None:
+    """(estimated, ground-truth) flow of the kept frame farthest from the target, for the
+    picture; None without ground truth."""
+    frames = [f for f in stream.frames if not f.is_target and f.truth is not None]
+    if not frames:
+        return None
+    g1 = frames[0].gripper
+    f = max(frames, key=lambda fr: float(np.linalg.norm(fr.gripper - g1)))
+    gt = f.truth.flow_to_target
+    if gt is None:
+        return None
+    est = flow.frame_flow(f, stream.target)
+    gt = np.where(f.truth.flow_valid[..., None], gt, 0.0) if f.truth.flow_valid is not None else gt
+    return est, np.asarray(gt, np.float32)
+
+
 class ExplorationWriter:
     """Writes the pictures, the video and the metrics of one exploration as it runs."""
 
@@ -168,8 +185,12 @@ class ExplorationWriter:
         for _ in range(8):
             self.video.write(label(img, "start segment"))
 
-    def interaction(self, inter: Any, stream: Stream, merged_votes: np.ndarray | None) -> None:
+    def interaction(
+        self, inter: Any, stream: Stream, merged_votes: np.ndarray | None, flow: Any = None
+    ) -> None:
         k = inter.index
+        if flow is not None:
+            inter.flow_example = flow_example(stream, flow)
         for f in stream.frames:
             if not f.is_target:
                 self.video.write(label(f.rgb, f"interaction {k}, action {f.action}"))
@@ -211,15 +232,9 @@ class ExplorationWriter:
         video = self.video.close()
         metrics = result.metrics()
         metrics["files"] = sorted(self.files + ([video.name] if video is not None else []))
-        (self.out / "metrics.json").write_text(json.dumps(metrics, indent=2, default=_json) + "\n")
+        (self.out / "metrics.json").write_text(
+            json.dumps(metrics, indent=2, default=json_default) + "\n"
+        )
 
     def close(self) -> None:
         self.video.close()
-
-
-def _json(v: Any) -> Any:
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, np.generic):
-        return v.item()
-    return repr(v)

@@ -33,7 +33,7 @@ def test_prototyping_notebook_executes(monkeypatch):
         o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
     )
     assert f"python: {sys.executable}" in text
-    assert "correlation" in text and "episode ok" in text
+    assert "correlation" in text and "interaction ok" in text
     images = [
         o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []) if "data" in o
     ]

@@ -15,9 +15,9 @@ import os
 import numpy as np
 
 from cablesim.camera.base import Camera, CameraImage
-from cablesim.episode.recording import Recording
 from cablesim.errors import RecordingError
 from cablesim.perception.frames import Frame, Intrinsics, Stream
+from cablesim.recording import Recording
 
 
 class ReplayCamera(Camera):

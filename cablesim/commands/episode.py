@@ -1,3 +1,120 @@
-"""``cablesim episode``: implemented in :mod:`cablesim.episode.cli`."""
+"""Run one seeded interaction: build the scene, pick a random graspable start segment of a hose
+(the stand-in for a person clicking on it), grasp, two periodic actions (along and across the
+hose), release, retreat out of view, settle, target frame.
 
-from cablesim.episode.cli import __doc__, add_arguments, run  # noqa: F401
+Files in --out:
+  recording/         the frame stream (see cablesim.recording; replay with
+                     cablesim.camera.replay.ReplayCamera)
+  contact_sheet.png  start image with the segment, a few action frames, the target frame and
+                     its ground-truth grasped-hose mask
+  start.png, target.png, target_labels.png
+  summary.json       config, result (gain per action, other hoses' displacement, frames kept,
+                     timings); also printed
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from cablesim.commands._args import (
+    add_interaction_arguments,
+    add_scene_arguments,
+    apply_interaction_arguments,
+    apply_scene_arguments,
+)
+from cablesim.errors import RecordingError
+from cablesim.perception.frames import LABEL_ROBOT, Stream
+from cablesim.sim.session import EpisodeConfig
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_scene_arguments(p, "episode and scene seed")
+    p.add_argument("--hose", type=int, default=None, help="hose to grasp (default: drawn)")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    add_interaction_arguments(p)
+    p.add_argument("--push", action="store_true", help="push (poke) instead of grasping")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing recording")
+
+
+def config_from_args(args: argparse.Namespace) -> EpisodeConfig:
+    cfg = EpisodeConfig(seed=args.seed, hose=args.hose, progress=not args.quiet)
+    apply_scene_arguments(cfg.scene, args)
+    apply_interaction_arguments(cfg.interaction, args)
+    if args.push:
+        cfg.interaction.kind = "push"
+    return cfg.validate()
+
+
+def _bgr(rgb: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(rgb[..., ::-1])
+
+
+def contact_sheet(
+    start_rgb: np.ndarray, segment: np.ndarray, stream: Stream, n_action_frames: int = 4
+) -> np.ndarray:
+    """One row: start image (segment in magenta), a few action frames, target, target mask."""
+    start = start_rgb.copy()
+    start[segment] = (255, 0, 255)
+    frames = [f for f in stream.frames if not f.is_target]
+    pick = np.linspace(0, len(frames) - 1, min(n_action_frames, len(frames))).round().astype(int)
+    tiles = [start] + [frames[i].rgb for i in pick] + [stream.target.rgb]
+    truth = stream.target.truth
+    if truth is not None and truth.grasped_hose is not None:
+        mask = np.zeros_like(start)
+        mask[truth.labels == truth.grasped_hose] = (255, 255, 255)
+        mask[truth.labels == LABEL_ROBOT] = (255, 0, 0)
+        tiles.append(mask)
+    h = tiles[0].shape[0]
+    sep = np.full((h, 4, 3), 255, np.uint8)
+    row: list[np.ndarray] = []
+    for t in tiles:
+        row += [t, sep]
+    return np.concatenate(row[:-1], axis=1)
+
+
+def run(args: argparse.Namespace) -> int:
+    from cablesim.sim.session import simulate_episode
+
+    cfg = config_from_args(args)
+    out: Path = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    rec = out / "recording"
+    if rec.exists() and any(rec.iterdir()) and not args.overwrite:
+        raise RecordingError(f"{rec} exists and is not empty (use --overwrite)")
+    if cfg.progress:
+        print(f"[episode] config:\n{cfg}")
+    ep = simulate_episode(cfg, record_to=out / "recording", overwrite=args.overwrite)
+    try:
+        res = ep.result
+        summary = {
+            "config": cfg.to_dict(),
+            "segment_px": int(ep.segment.mask.sum()),
+            "scene_build_s": ep.build_time,
+            "result": res.to_dict(),
+        }
+        if res.success and res.stream is not None:
+            start_img = ep.start_image.rgb
+            sheet = contact_sheet(start_img, ep.segment.mask, res.stream)
+            cv2.imwrite(str(out / "contact_sheet.png"), _bgr(sheet))
+            cv2.imwrite(str(out / "start.png"), _bgr(start_img))
+            cv2.imwrite(str(out / "target.png"), _bgr(res.stream.target.rgb))
+            t = res.stream.target.truth
+            if t is not None:
+                lab = np.where(t.labels >= 0, 60 + 40 * t.labels, 0)
+                lab[t.labels == LABEL_ROBOT] = 255
+                cv2.imwrite(str(out / "target_labels.png"), lab.astype(np.uint8))
+            kept = len(res.stream) - 1
+            summary["frames_kept"] = kept
+            summary["gain"] = {a.label: a.gain for a in res.actions}
+            summary["other_hoses_max_displacement_m"] = res.other_hose_displacement()
+        (out / "summary.json").write_text(json.dumps(summary, indent=2))
+        print(res.summary())
+        print(f"[episode] wrote {out}")
+        return 0 if res.success else 1
+    finally:
+        ep.close()

@@ -14,12 +14,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from cablesim.commands._args import (
+    add_interaction_arguments,
+    add_scene_arguments,
+    apply_interaction_arguments,
+    apply_scene_arguments,
+)
 from cablesim.policies.config import FLOWS, MERGES, STRATEGIES, ExploreConfig
-from cablesim.policies.perturb import PerturbConfig
+from cablesim.sim.perturb import PerturbConfig
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=int, default=0, help="scene and exploration seed (default 0)")
+    add_scene_arguments(p, "scene and exploration seed")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--hose", type=int, default=None, help="hose of interest (default: drawn)")
     p.add_argument("--grasps", type=int, default=3, help="budget of successful grasps (3)")
@@ -32,13 +38,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--flow", choices=FLOWS, default="dis", help="optical flow back end (dis)")
     p.add_argument("--raft-checkpoint", type=Path, default=None, help="weights for --flow raft")
-    p.add_argument("--merge", choices=MERGES, default="auto", help="vote carrying between targets")
+    p.add_argument(
+        "--merge",
+        choices=MERGES,
+        default="dis",
+        help="vote carrying between targets: dis (default), oracle (ground truth), none",
+    )
     p.add_argument("--perturb", action="store_true", help="disturb neighbouring hoses in actions")
-    p.add_argument("--hoses", type=int, default=None, help="number of hoses (default 4)")
-    p.add_argument("--width", type=int, default=None, help="image width (default 640)")
-    p.add_argument("--height", type=int, default=None, help="image height (default 480)")
-    p.add_argument("--periods", type=int, default=None, help="periods per action (K_p, 3)")
-    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    add_interaction_arguments(p)
 
 
 def config_from_args(args: argparse.Namespace) -> ExploreConfig:
@@ -51,15 +58,11 @@ def config_from_args(args: argparse.Namespace) -> ExploreConfig:
         method=args.method,
         flow=args.flow,
         merge=args.merge,
-        width=args.width,
-        height=args.height,
         perturb=PerturbConfig(enabled=bool(args.perturb)),
         progress=not args.quiet,
     )
-    if args.hoses is not None:
-        cfg.episode.scene.hoses.count = args.hoses
-    if args.periods is not None:
-        cfg.episode.actions.periods = args.periods
+    apply_scene_arguments(cfg.episode.scene, args)
+    apply_interaction_arguments(cfg.episode.interaction, args)
     return cfg.validate()
 
 

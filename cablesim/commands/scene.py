@@ -19,6 +19,7 @@ import cv2
 import mujoco
 import numpy as np
 
+from cablesim.commands._args import add_scene_arguments, apply_scene_arguments
 from cablesim.config import to_dict
 from cablesim.errors import InputError
 from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
@@ -48,27 +49,18 @@ BACKGROUND_COLOUR = np.array([0, 0, 0], np.uint8)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=int, default=0, help="scene seed (default 0)")
+    add_scene_arguments(p)
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--background", choices=BACKGROUNDS, default=None, help="board background")
-    p.add_argument("--width", type=int, default=None, help="image width (default 640)")
-    p.add_argument("--height", type=int, default=None, help="image height (default 480)")
-    p.add_argument("--hoses", type=int, default=None, help="number of hoses (default 4)")
     p.add_argument("--hose", type=int, default=0, help="which hose to pull (default 0)")
     p.add_argument("--no-robot", action="store_true", help="leave the arm out of the scene")
     p.add_argument("--depth-noise", action="store_true", help="RealSense-like depth noise")
 
 
 def scene_config(args: argparse.Namespace) -> SceneConfig:
-    cfg = SceneConfig(seed=args.seed)
+    cfg = apply_scene_arguments(SceneConfig(), args)
     if args.background is not None:
         cfg.board.background = args.background
-    if args.width is not None:
-        cfg.camera.width = args.width
-    if args.height is not None:
-        cfg.camera.height = args.height
-    if args.hoses is not None:
-        cfg.hoses.count = args.hoses
     if args.no_robot:
         cfg.robot.enabled = False
     cfg.camera.depth_noise = bool(args.depth_noise)

@@ -1,48 +1,37 @@
-"""One interaction of the robot with a hose (SPEC section 3), in simulation, recorded.
+"""One interaction of a robot with a hose (SPEC section 3), for the simulated and the real robot.
 
-    from cablesim.episode import EpisodeConfig, simulate_episode
-    out = simulate_episode(EpisodeConfig(seed=2, hose=1), record_to="runs/ep2")
-    out.result.stream                     # Frames: kept action samples ..., target frame last
-    print(out.result.summary())           # gain per action, other hoses' displacement
+    from cablesim.episode import InteractionConfig, run_interaction
+    result = run_interaction(robot, camera, clock, segment, InteractionConfig(), truth=None)
 
-Modules: ``config`` (EpisodeConfig), ``primitives`` (grasp/actions/push/release/retreat on the
-Robot interface), ``trigger`` (camera ticks on simulated time), ``capture`` (kept frames and
-ground truth), ``runner`` (run_episode), ``picker`` (random graspable start segment),
-``recording`` (on-disk format, reader), ``simulate`` (all of it from a seed), ``cli``.
-Importing this package does not import MuJoCo; ``runner``, ``picker`` and ``simulate`` do.
+Modules: ``config`` (InteractionConfig), ``primitives`` (grasp/actions/push/release/retreat on
+the Robot interface), ``clock`` (the Clock protocol, ticks, the real-device StreamClock and
+stillness from images), ``truth`` (the optional ground-truth provider protocol), ``capture``
+(ticks -> kept frames), ``runner`` (run_interaction).  Nothing here imports the simulator: the
+simulated clock, truth and session live in :mod:`cablesim.sim`
+(``cablesim.sim.session.simulate_episode`` runs all of it from a seed).
 """
 
 from cablesim.episode.config import (
     ActionConfig,
     CaptureConfig,
-    EpisodeConfig,
     GraspConfig,
+    InteractionConfig,
     RetreatConfig,
-)
-from cablesim.episode.recording import (
-    Recording,
-    RecordingWriter,
-    read_stream,
-    write_stream,
 )
 
 __all__ = [
     "ActionConfig",
     "CaptureConfig",
-    "EpisodeConfig",
     "GraspConfig",
-    "Recording",
-    "RecordingWriter",
+    "InteractionConfig",
     "RetreatConfig",
-    "read_stream",
-    "simulate_episode",
-    "write_stream",
+    "run_interaction",
 ]
 
 
-def __getattr__(name: str):  # lazy: simulate_episode imports MuJoCo
-    if name == "simulate_episode":
-        from cablesim.episode.simulate import simulate_episode
+def __getattr__(name: str):  # lazy: the runner imports the robot interface (MuJoCo poses)
+    if name == "run_interaction":
+        from cablesim.episode.runner import run_interaction
 
-        return simulate_episode
+        return run_interaction
     raise AttributeError(name)

@@ -1,36 +1,35 @@
-"""Turning camera ticks into the frames of a stream (SPEC sections 2, 3.5, 6).
+"""Turning the clock's ticks into the frames of a stream (SPEC sections 2, 3.5, 6).
 
-:class:`FrameCollector` is called at every camera tick during an action.  It reads the
-gripper position in the camera frame from the robot and keeps the tick only when the gripper
-moved at least ``min_gripper_step`` since the last kept sample of the action (the same rule
-as :func:`cablesim.perception.subsample_by_gripper`); only kept ticks are rendered.  With a
-:class:`~cablesim.sim.camera.SimCamera` and ``ground_truth=True`` each kept frame carries
-labels, and, once the target frame exists, the ground-truth flow *from the target frame to it*
-(``FrameTruth.flow_to_target``: target pixel p shows the point that is at p + flow in the
-frame, computed by ``cablesim.sim.flow_gt.flow_to_target``).  Snapshots are kept only until
-the flow is computed.
+:class:`FrameCollector` receives every tick of the clock during an action.  It converts the
+tick's gripper pose into the camera frame and keeps the tick only when the gripper moved at
+least ``min_gripper_step`` since the last kept sample of the action (the same rule as
+:func:`cablesim.perception.subsample_by_gripper`); only kept ticks grab their image.  With a
+ground-truth provider every kept frame carries labels, and, once the target frame exists,
+ground-truth flow *from the target frame to it* (``FrameTruth.flow_to_target``).
 
 Each finished frame goes to ``sink`` (e.g. a recording writer) as soon as it is complete: action
-frames at capture time (without flow), the target frame, then the flows.
+frames at capture time (without flow), the target frame, then the flows.  Ticks may arrive on
+another thread (a real camera stream); the collector serialises them.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
-from typing import Any, Protocol
 
 import numpy as np
 
-from cablesim.camera.base import Camera
-from cablesim.perception.frames import TARGET_ACTION, Frame, FrameTruth
-from cablesim.robot.base import Robot
+from cablesim.camera.base import CameraImage
+from cablesim.episode.clock import Tick
+from cablesim.episode.truth import FrameSink, TruthProvider
+from cablesim.perception.frames import TARGET_ACTION, Frame
+from cablesim.robot.pose import Pose
 
 
-class FrameSink(Protocol):
-    def add_frame(self, index: int, frame: Frame) -> None: ...
-
-    def add_flow(self, index: int, flow: np.ndarray, valid: np.ndarray) -> None: ...
+def pose_in_camera(T_world_camera: np.ndarray, pose: Pose) -> Pose:
+    """A world pose in the camera frame."""
+    return Pose.from_matrix(np.linalg.inv(T_world_camera) @ pose.matrix())
 
 
 class FrameCollector:
@@ -38,27 +37,22 @@ class FrameCollector:
 
     def __init__(
         self,
-        camera: Camera,
-        robot: Robot,
+        T_world_camera: np.ndarray,
         min_gripper_step: float = 0.001,
-        ground_truth: bool = True,
-        grasped_hose: int | None = None,
+        truth: TruthProvider | None = None,
         sink: FrameSink | None = None,
-        on_tick: Callable[[int, float], None] | None = None,
     ):
-        self.camera = camera
-        self.robot = robot
+        self.T = np.asarray(T_world_camera, float)
         self.min_step = float(min_gripper_step)
-        self.ground_truth = bool(ground_truth) and hasattr(camera, "snapshot")
-        self.grasped_hose = grasped_hose
+        self.truth = truth
         self.sink = sink
-        self.on_tick = on_tick
         self.frames: list[Frame] = []
-        self._snaps: list[Any] = []
         self.action: int | None = None
         self._sample = 0
         self._last: np.ndarray | None = None
+        self._lock = threading.Lock()
         self.ticks = 0
+        self.skews: list[float] = []
         self.render_time = 0.0
         self.truth_time = 0.0
 
@@ -67,70 +61,56 @@ class FrameCollector:
         self.action, self._sample, self._last = int(action), 0, None
 
     def end_action(self) -> None:
-        self.action = None
+        with self._lock:
+            self.action = None
 
-    def on_frame(self, sim_time: float) -> None:
-        """A camera tick at simulated time ``sim_time``."""
-        if self.action is None:
-            return
-        self.ticks += 1
-        if self.on_tick is not None:
-            self.on_tick(self.action, sim_time)
-        tcp = self.robot.ee_pose_camera()
-        g = tcp.position
-        if self._last is not None and np.linalg.norm(g - self._last) < self.min_step:
-            return
-        self._last = g
-        frame = self._capture(self.action, self._sample, sim_time)
-        self._sample += 1
-        self._emit(frame)
+    def kept(self, action: int) -> int:
+        return sum(1 for f in self.frames if f.action == action)
+
+    def on_tick(self, tick: Tick) -> None:
+        """A camera tick during an action."""
+        with self._lock:
+            if self.action is None:
+                return
+            self.ticks += 1
+            if self.truth is not None:
+                self.truth.on_tick(self.action, tick)
+            tcp = pose_in_camera(self.T, tick.gripper)
+            if self._last is not None and np.linalg.norm(tcp.position - self._last) < self.min_step:
+                return
+            self._last = tcp.position
+            t0 = time.perf_counter()
+            image = tick.image()
+            self.render_time += time.perf_counter() - t0
+            self.skews.append(float(tick.skew))
+            self._emit(self._frame(image, tcp, tick.opening, self.action, self._sample, tick.time))
+            self._sample += 1
 
     # ------------------------------------------------------------------ target
-    def capture_target(self, sim_time: float) -> Frame:
-        frame = self._capture(TARGET_ACTION, 0, sim_time)
+    def capture_target(self, grab: Callable[[], CameraImage], tick: Tick) -> Frame:
+        """The target frame: grabbed now, with the gripper state of ``tick``."""
+        t0 = time.perf_counter()
+        image = grab()
+        self.render_time += time.perf_counter() - t0
+        tcp = pose_in_camera(self.T, tick.gripper)
+        frame = self._frame(image, tcp, tick.opening, TARGET_ACTION, 0, tick.time)
         self._emit(frame)
         return frame
 
-    def add_flows(self, progress: Callable[[str], None] | None = None) -> None:
-        """Ground-truth flow from the target (the last captured frame) to every action frame."""
-        if not self.ground_truth or not self.frames or not self.frames[-1].is_target:
-            return
-        from cablesim.sim.flow_gt import flow_to_target
-
-        target_snap = self._snaps[-1]
-        n = len(self.frames) - 1
-        for i, (frame, snap) in enumerate(zip(self.frames[:-1], self._snaps[:-1], strict=True)):
-            t0 = time.perf_counter()
-            gt = flow_to_target(snap, target_snap)
-            self.truth_time += time.perf_counter() - t0
-            assert frame.truth is not None
-            frame.truth.flow_to_target = gt.flow
-            frame.truth.flow_valid = gt.valid
-            if self.sink is not None:
-                self.sink.add_flow(i, gt.flow, gt.valid)
-            self._snaps[i] = None
-            if progress is not None and (i + 1) % 25 == 0:
-                progress(f"ground-truth flow {i + 1}/{n}")
-        last = self.frames[-1]
-        assert last.truth is not None
-        h, w = last.shape
-        last.truth.flow_to_target = np.zeros((h, w, 2), np.float32)
-        last.truth.flow_valid = np.ones((h, w), bool)
-        self._snaps = []
+    def finish(self, say: Callable[[str], None]) -> None:
+        """Ground-truth flow from the target frame to every action frame (with truth)."""
+        if self.truth is not None:
+            self.truth_time += self.truth.finish(self.frames, self.sink, say)
 
     # ------------------------------------------------------------------ internals
-    def _capture(self, action: int, sample: int, sim_time: float) -> Frame:
-        tcp = self.robot.ee_pose_camera()
+    def _frame(
+        self, image: CameraImage, tcp: Pose, opening: float, action: int, sample: int, t: float
+    ) -> Frame:
         truth = None
-        t0 = time.perf_counter()
-        if self.ground_truth:
-            snap = self.camera.snapshot()  # type: ignore[attr-defined]
-            image = snap.image
-            truth = FrameTruth(labels=snap.labels, grasped_hose=self.grasped_hose)
-            self._snaps.append(snap)
-        else:
-            image = self.camera.capture()
-        self.render_time += time.perf_counter() - t0
+        if self.truth is not None:
+            t0 = time.perf_counter()
+            truth = self.truth.frame_truth(image)
+            self.render_time += time.perf_counter() - t0
         return Frame(
             rgb=image.rgb,
             depth=image.depth,
@@ -138,9 +118,9 @@ class FrameCollector:
             gripper=tcp.position,
             action=action,
             sample=sample,
-            timestamp=float(sim_time),
+            timestamp=float(t),
             gripper_quat=tcp.quaternion,
-            gripper_opening=float(self.robot.gripper_opening),
+            gripper_opening=float(opening),
             truth=truth,
         )
 

@@ -1,12 +1,12 @@
-"""Typed, seeded, printable configuration of one interaction (SPEC section 3).
+"""Typed, printable configuration of one interaction (SPEC section 3), for the simulated and the
+real robot alike.
 
-    cfg = EpisodeConfig(seed=3, hose=1)
-    print(cfg)                          # JSON
-    EpisodeConfig.from_dict(cfg.to_dict()) == cfg
+    cfg = InteractionConfig()            # grasp, two periodic actions, release, retreat
+    print(cfg)                           # JSON
+    InteractionConfig.from_dict(cfg.to_dict()) == cfg
 
-``seed`` is the one seed of an episode: it replaces ``scene.seed`` (the scene is built from it)
-and draws the episode's own random choices (hose, segment) from
-``rng_streams(seed)["episode"]``.
+The simulated session's config (:class:`cablesim.sim.session.EpisodeConfig`: seed, scene,
+hose, perturbation) holds one of these; so does a real-robot exploration.
 """
 
 from __future__ import annotations
@@ -17,8 +17,10 @@ from typing import Any
 
 from cablesim.config import check_positive, from_dict, pretty, to_dict
 from cablesim.errors import ConfigError
-from cablesim.sim.config import SceneConfig
+from cablesim.panda.description import PARK_QPOS
 
+#: What an interaction does with the hose.
+KINDS = ("grasp", "push")
 #: Named action directions (see :func:`cablesim.episode.primitives.action_direction`).
 DIRECTION_NAMES = ("along", "across", "normal", "vertical", "horizontal")
 
@@ -94,35 +96,42 @@ class CaptureConfig:
         check_positive("capture.min_gripper_step", self.min_gripper_step, allow_zero=True)
 
 
-#: The retract configuration turned away about joint 1: zero robot pixels in the default camera
-#: for joint 1 in [-2.10, -1.70] (tests/episode/test_failures_retreat.py checks it).
-FALLBACK_RETREAT_QPOS = (-1.9, -0.6, 0.0, -2.3, 0.0, 1.7, 0.785398)
-
-
 @dataclass
 class RetreatConfig:
-    """Release, back off, move to a joint configuration out of view, settle."""
+    """Release, back off, move to a joint configuration out of view, wait until the hoses are
+    still, then take the target frame.
+
+    Stillness: in simulation the physics settle (every hose vertex slower than
+    ``settle_speed``); on a real camera, consecutive frames that differ by less than
+    ``still_rgb`` (mean absolute grey-level change) and in which at most ``still_depth_fraction``
+    of the valid pixels change depth by more than ``still_depth`` for ``still_time`` seconds.
+    Either gives up after ``settle_max_time`` seconds with a named outcome.
+    """
 
     back_off: float = 0.12  # m pulled back along -approach after release
-    # joint configuration out of view; None: the scene's ``robot.park_qpos`` when it has one,
-    # else FALLBACK_RETREAT_QPOS.  The target frame is checked for zero robot pixels.
+    # joint configuration out of view; None: the set-up's park configuration (the scene's
+    # ``robot.park_qpos`` in simulation, ``PARK_QPOS`` otherwise).  With ground truth the
+    # target frame is checked for zero robot pixels.
     qpos: tuple[float, ...] | None = None
     speed_factor: float = 0.5
-    verify: bool = True  # render labels of the target frame and insist on zero robot pixels
-    settle_speed: float = 0.001  # m/s, every hose vertex slower than this
-    settle_max_time: float = 6.0  # s of simulated time
-    settle_check_every: float = 0.1  # s
+    verify: bool = True  # with ground truth: insist on zero robot pixels in the target frame
+    settle_speed: float = 0.001  # m/s, every hose vertex slower than this (simulation)
+    settle_max_time: float = 6.0  # s to wait for stillness
+    settle_check_every: float = 0.1  # s (simulation)
+    still_rgb: float = 1.5  # grey levels, mean absolute change between frames (camera)
+    still_depth: float = 0.005  # m, a depth change larger than this counts as motion (camera)
+    still_depth_fraction: float = 0.005  # of valid pixels allowed to change depth (camera)
+    still_time: float = 1.0  # s the frames must stay still (camera)
 
     def __post_init__(self) -> None:
         if self.qpos is not None:  # from JSON: a list
             self.qpos = tuple(float(q) for q in self.qpos)
 
-    def joint_target(self, scene: Any = None) -> tuple[float, ...]:
-        """The retreat joint configuration (see ``qpos``) for a scene config."""
+    def joint_target(self, park: tuple[float, ...] | None = None) -> tuple[float, ...]:
+        """The retreat joint configuration: ``qpos``, else ``park``, else ``PARK_QPOS``."""
         if self.qpos is not None:
             return tuple(self.qpos)
-        park = getattr(getattr(scene, "robot", None), "park_qpos", None)
-        return tuple(park) if park is not None else FALLBACK_RETREAT_QPOS
+        return tuple(park) if park is not None else tuple(PARK_QPOS)
 
     def validate(self) -> None:
         if self.qpos is not None and len(self.qpos) != 7:
@@ -130,57 +139,47 @@ class RetreatConfig:
         check_positive("retreat.back_off", self.back_off, allow_zero=True)
         if not 0 < self.speed_factor <= 1:
             raise ConfigError("retreat.speed_factor", f"must be in (0, 1], got {self.speed_factor}")
-        check_positive("retreat.settle_check_every", self.settle_check_every)
-        check_positive("retreat.settle_speed", self.settle_speed)
-        check_positive("retreat.settle_max_time", self.settle_max_time)
+        for name in (
+            "settle_check_every",
+            "settle_speed",
+            "settle_max_time",
+            "still_rgb",
+            "still_depth",
+            "still_time",
+        ):
+            check_positive(f"retreat.{name}", getattr(self, name))
+        check_positive("retreat.still_depth_fraction", self.still_depth_fraction, allow_zero=True)
 
 
 @dataclass
-class EpisodeConfig:
-    """One interaction: scene, which hose, grasp, actions, capture, retreat."""
+class InteractionConfig:
+    """One interaction: grasp (or push), actions, capture, retreat."""
 
-    seed: int = 0
-    hose: int | None = None  # None: drawn from the episode generator
     kind: str = "grasp"  # "grasp" or "push"
     push_depth: float = 0.02  # m pressed into the hose by a push, along the approach
-    scene: SceneConfig = field(default_factory=SceneConfig)
     grasp: GraspConfig = field(default_factory=GraspConfig)
     actions: ActionConfig = field(default_factory=ActionConfig)
     capture: CaptureConfig = field(default_factory=CaptureConfig)
     retreat: RetreatConfig = field(default_factory=RetreatConfig)
-    progress: bool = False  # print progress lines
 
-    def validate(self) -> EpisodeConfig:
-        if not isinstance(self.seed, int) or self.seed < 0:
-            raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
-        if self.hose is not None and (
-            isinstance(self.hose, bool)
-            or not isinstance(self.hose, int)
-            or not 0 <= self.hose < self.scene.hoses.count
-        ):
-            raise ConfigError("hose", f"{self.hose} is not one of {self.scene.hoses.count} hoses")
-        if self.kind not in ("grasp", "push"):
-            raise ConfigError("kind", f"must be 'grasp' or 'push', got {self.kind!r}")
+    def validate(self) -> InteractionConfig:
+        if self.kind not in KINDS:
+            raise ConfigError("kind", f"must be one of {KINDS}, got {self.kind!r}")
         check_positive("push_depth", self.push_depth)
-        self.scene_config().validate()
         self.grasp.validate()
         self.actions.validate()
         self.capture.validate()
         self.retreat.validate()
         return self
 
-    def scene_config(self) -> SceneConfig:
-        """The scene, with ``seed`` as its seed."""
-        return dataclasses.replace(self.scene, seed=self.seed)
-
-    def replace(self, **changes: Any) -> EpisodeConfig:
+    def replace(self, **changes: Any) -> InteractionConfig:
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
         return to_dict(self)
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> EpisodeConfig:
+    def from_dict(cls, data: dict[str, Any]) -> InteractionConfig:
         return from_dict(cls, data)
 
     def __str__(self) -> str:

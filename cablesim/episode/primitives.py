@@ -23,11 +23,11 @@ from typing import Any
 
 import numpy as np
 
-from cablesim.episode.config import ActionConfig, GraspConfig, RetreatConfig
+from cablesim.episode.config import ActionConfig, GraspConfig, InteractionConfig, RetreatConfig
+from cablesim.panda.description import RETRACT_QPOS
 from cablesim.robot.base import MoveResult, Robot
 from cablesim.robot.grasping import move_joints_safely
 from cablesim.robot.pose import Pose, grasp_pose
-from cablesim.robot.sim_panda import RETRACT_QPOS
 
 #: The default approach: the hand points at the board (world +x); the board normal is -x.
 DEFAULT_APPROACH = (1.0, 0.0, 0.0)
@@ -107,6 +107,41 @@ def action_directions(
     out = [(d, action_direction(d, axis_world, T_world_camera, approach)) for d in cfg.directions]
     out += [(f"vector{i}", _unit(v)) for i, v in enumerate(cfg.extra_directions)]
     return out
+
+
+# ---------------------------------------------------------------------- planning
+def grasp_centre(
+    T_world_camera: np.ndarray, centre_camera: np.ndarray, surface_offset: float
+) -> np.ndarray:
+    """World grasp centre for the centre of a seen hose surface (camera frame): the hose axis
+    lies ``surface_offset`` (its radius) behind the surface along the viewing ray."""
+    T = np.asarray(T_world_camera, float)
+    R, t = T[:3, :3], T[:3, 3]
+    c = np.asarray(centre_camera, float)
+    ray = R @ (c / np.linalg.norm(c))
+    return R @ c + t + surface_offset * ray
+
+
+def check_interaction(
+    robot: Robot,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    cfg: InteractionConfig,
+    T_world_camera: np.ndarray,
+    approach: Sequence[float] = DEFAULT_APPROACH,
+) -> tuple[bool, str]:
+    """Whether an interaction at world ``centre``/``axis`` is reachable without moving: the
+    grasp and pre-grasp poses and, for a grasp, every action's end points g1 +- D."""
+    g, why = choose_grasp_pose(robot, centre, axis, approach, cfg.grasp.pregrasp_offset)
+    if g is None:
+        return False, why
+    if cfg.kind == "grasp":
+        for label, u in action_directions(cfg.actions, axis, T_world_camera, approach):
+            for s in (1.0, -1.0):
+                ok, why = robot.check_reachable(g.translated(s * cfg.actions.amplitude * u))
+                if not ok:
+                    return False, f"action {label} end point: {why}"
+    return True, ""
 
 
 # ---------------------------------------------------------------------- grasp

@@ -17,6 +17,7 @@ from typing import Literal
 
 import numpy as np
 
+from cablesim.panda.description import HOME_QPOS
 from cablesim.robot.pose import Pose
 
 Frame = Literal["world", "camera", "tcp"]
@@ -86,8 +87,6 @@ class Robot(abc.ABC):
 
     def home(self, speed_factor: float = 0.3) -> MoveResult:
         """Joint-space motion to the home configuration."""
-        from cablesim.sim.panda import HOME_QPOS
-
         return self.move_joints(HOME_QPOS, speed_factor)
 
     @abc.abstractmethod

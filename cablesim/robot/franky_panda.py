@@ -1,7 +1,7 @@
 """The real Panda through franky-control (``pip install 'cablesim[real]'``).
 
 :class:`FrankyPanda` implements the same :class:`~cablesim.robot.base.Robot` interface as the
-simulated :class:`~cablesim.robot.sim_panda.SimPanda`, so the episode code drives either.
+simulated :class:`~cablesim.sim.sim_panda.SimPanda`, so the episode code drives either.
 
 Frames.  Poses given to and returned by the interface are TCP poses in the *world* frame (the
 frame of the camera extrinsics ``T_world_camera``).  The robot works in its *base* frame ``O``;
@@ -13,7 +13,7 @@ configured (``F_T_EE = F_T_NE * NE_T_EE = FLANGE_T_TCP``); ``O_T_EE`` is then th
 the base frame and Cartesian motions move the TCP along straight lines.
 
 Motions.  Before anything is sent, a Cartesian target is checked on the arm-only
-:class:`~cablesim.robot.ik.ArmModel` (the same kinematics, joint limits and static obstacles as
+:class:`~cablesim.panda.ik.ArmModel` (the same kinematics, joint limits and static obstacles as
 the simulated robot): IK along the straight line, every waypoint within limits and free of
 collisions.  A target that fails this check returns ``MoveResult(False, reason)`` without
 moving.  A motion the robot aborts (franky's ``ControlException`` carrying a reflex, e.g. a
@@ -41,26 +41,13 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 import numpy as np
 
+from cablesim.panda.description import FLANGE_T_TCP, HAND_OFFSET, MAX_OPENING
+from cablesim.panda.ik import ArmModel, ArmModelChecks, Obstacle
 from cablesim.robot.base import Frame, MoveResult, Robot
-from cablesim.robot.ik import ArmModel, ArmModelChecks, Obstacle
 from cablesim.robot.pose import Pose
-from cablesim.sim.panda import HAND_OFFSET, MAX_OPENING, TCP_OFFSET
 
 if TYPE_CHECKING:  # pragma: no cover
     import franky
-
-
-def _flange_t_tcp() -> np.ndarray:
-    c, s = math.cos(-math.pi / 4), math.sin(-math.pi / 4)
-    T = np.eye(4)
-    T[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
-    T[2, 3] = TCP_OFFSET
-    return T
-
-
-#: The Franka Hand's TCP (between the finger pads) in the flange frame: what Desk sets as
-#: ``F_T_NE`` when the hand is configured, and the simulated model's ``grasp_site``.
-FLANGE_T_TCP: np.ndarray = _flange_t_tcp()
 
 
 def _import_franky() -> Any:
@@ -415,7 +402,7 @@ def franka_sim_mjcf() -> str:
     gripper model.  Each link's largest geom is named ``link{N}_collision``, which arms the
     server's self-collision reflex (with ``enforce_motion_limits``).  MuJoCo >= 3.2 reads it.
     """
-    from cablesim.sim.panda import panda_spec
+    from cablesim.panda.model import panda_spec
 
     spec = panda_spec(home_key=False)
     hand = spec.body("hand")

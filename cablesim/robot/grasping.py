@@ -7,15 +7,9 @@ close.  ``release_and_retreat``: open, straight line out, retract.
 
 from __future__ import annotations
 
+from cablesim.panda.description import MAX_OPENING, RETRACT_QPOS
 from cablesim.robot.base import MoveResult, Robot
 from cablesim.robot.pose import Pose
-from cablesim.sim.panda import MAX_OPENING
-
-
-def _retract_qpos():
-    from cablesim.robot.sim_panda import RETRACT_QPOS as q
-
-    return q
 
 
 def pregrasp_pose(grasp: Pose, distance: float) -> Pose:
@@ -28,7 +22,7 @@ def move_joints_safely(robot: Robot, q, speed_factor: float = 0.3) -> MoveResult
     res = robot.move_joints(q, speed_factor)
     if res or not res.reason.startswith("collision"):
         return res
-    via = robot.move_joints(_retract_qpos(), speed_factor)
+    via = robot.move_joints(RETRACT_QPOS, speed_factor)
     if not via:
         return MoveResult(False, f"direct path blocked ({res.reason}); via retract: {via.reason}")
     return robot.move_joints(q, speed_factor)
@@ -55,7 +49,7 @@ def approach_and_grasp(
         robot.open()
     # Through the retract configuration (hand down, pulled back): a direct joint move from
     # wherever the arm is may sweep through hoses, which the arm-only checks cannot see.
-    res = move_joints_safely(robot, _retract_qpos())
+    res = move_joints_safely(robot, RETRACT_QPOS)
     if not res:
         return MoveResult(False, f"could not retract before the approach: {res.reason}"), False
     res = robot.move_joints(q_pre)
@@ -74,4 +68,4 @@ def release_and_retreat(robot: Robot, distance: float = 0.08, speed: float = 0.1
     res = robot.move_to(pregrasp_pose(pose, distance), speed=speed)
     if not res:
         return res
-    return move_joints_safely(robot, _retract_qpos())
+    return move_joints_safely(robot, RETRACT_QPOS)

@@ -13,7 +13,7 @@ come from one render pass, labels from a second one.
 
 The optional depth noise (``cfg.camera.depth_noise``) is RealSense-like: Gaussian with
 sigma = k z^2, 1 mm quantisation, and dropped pixels (0) at depth discontinuities; it is
-drawn from ``rng_streams(cfg.seed)["depth_noise"]``, so a camera created for the same seed
+drawn from the seed's ``depth_noise`` stream (:mod:`cablesim.seeding`), so a camera created for the same seed
 produces the same noise sequence.
 """
 
@@ -30,7 +30,7 @@ import numpy as np
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.errors import InputError
 from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT, Intrinsics
-from cablesim.sim.layout import rng_streams
+from cablesim.seeding import stream
 
 if TYPE_CHECKING:
     from cablesim.sim.world import World
@@ -130,7 +130,7 @@ class SimCamera(Camera):
             )
         self.depth_noise = bool(c.depth_noise if depth_noise is None else depth_noise)
         self._noise_std_per_m2 = float(c.depth_noise_std_per_m2)
-        self._rng = rng_streams(world.cfg.seed)["depth_noise"]
+        self._rng = stream(world.cfg.seed, "depth_noise")
         fovy = float(m.cam_fovy[world.camera_id])
         self._intrinsics = intrinsics_from_fovy(self.width, self.height, fovy)
         # multisampling costs 2-3x on software OpenGL and blurs label boundaries: off by
@@ -185,6 +185,23 @@ class SimCamera(Camera):
         state, so ground-truth flow to or from any other snapshot can be computed later."""
         rgb, _ = self._render_rgbd()
         labels, body, depth = self._render_segmentation()
+        return self._snapshot(self._image(rgb, depth), labels, body, depth, meta)
+
+    def snapshot_of(self, image: CameraImage, **meta: Any) -> SimSnapshot:
+        """The snapshot of the current state for an ``image`` already captured in it (only the
+        labels are rendered)."""
+        self._update_scene()
+        labels, body, depth = self._render_segmentation()
+        return self._snapshot(image, labels, body, depth, meta)
+
+    def _snapshot(
+        self,
+        image: CameraImage,
+        labels: np.ndarray,
+        body: np.ndarray,
+        depth: np.ndarray,
+        meta: dict[str, Any],
+    ) -> SimSnapshot:
         d = self.world.data
         verts = tuple(self.world.hose_vertices(i) for i in range(len(self.world.hoses)))
         twist = tuple(d.qpos[adr].copy() for adr in self._twist_qpos)
@@ -192,7 +209,7 @@ class SimCamera(Camera):
             time=float(d.time),
             intrinsics=self._intrinsics,
             T_world_camera=self.world.T_world_camera.copy(),
-            image=self._image(rgb, depth),
+            image=image,
             depth=depth,
             labels=labels,
             body=body,

@@ -13,6 +13,7 @@ from typing import Any
 
 from cablesim.config import check_positive, check_range, from_dict, pretty, to_dict
 from cablesim.errors import ConfigError
+from cablesim.panda.description import PARK_QPOS
 
 BACKGROUNDS = ("wood", "bushes", "cables", "solid")
 
@@ -152,7 +153,7 @@ class RobotConfig:
     base_yaw: float = 1.1  # radians about z; 0 faces +x
     # where the arm waits: away from the hoses and out of the default camera's view (the scene
     # starts and settles with the arm here; ``SimPanda`` retreats here before a target frame)
-    park_qpos: tuple[float, ...] = (-2.0, -0.5, 0.0, -2.8, 0.0, 2.3, 0.78)
+    park_qpos: tuple[float, ...] = PARK_QPOS
 
     def validate(self) -> None:
         if len(self.base_position) != 3:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cablesim.seeding import stream
 from cablesim.sim.config import SceneConfig
 
 FEMALE_LENGTH = 0.05  # the female coupling on a hose end (mesh length)
@@ -42,13 +43,6 @@ class CameraPose:
     look_at: np.ndarray  # (3,) world
 
 
-def rng_streams(seed: int) -> dict[str, np.random.Generator]:
-    """Independent generators for each random part, so changing one part leaves the others."""
-    names = ("hoses", "camera", "depth_noise", "episode")
-    children = np.random.SeedSequence(seed).spawn(len(names))
-    return {n: np.random.default_rng(c) for n, c in zip(names, children, strict=True)}
-
-
 def attach_point(cfg: SceneConfig, connector: int) -> np.ndarray:
     """World position where a hose end sits on a connector (the coupling's outer end)."""
     y, z = cfg.board.connectors[connector]
@@ -58,7 +52,7 @@ def attach_point(cfg: SceneConfig, connector: int) -> np.ndarray:
 
 def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
     h = cfg.hoses
-    rng = rng_streams(cfg.seed)["hoses"]
+    rng = stream(cfg.seed, "hoses")
     free = list(range(len(cfg.board.connectors)))
     colour_order = rng.permutation(len(h.colors))
     specs = []
@@ -113,7 +107,7 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
 
 
 def sample_camera(cfg: SceneConfig) -> CameraPose:
-    rng = rng_streams(cfg.seed)["camera"]
+    rng = stream(cfg.seed, "camera")
     c = cfg.camera
     pos = np.asarray(c.position, float) + rng.uniform(-1, 1, 3) * c.position_jitter
     look = np.asarray(c.look_at, float) + rng.uniform(-1, 1, 3) * c.look_at_jitter

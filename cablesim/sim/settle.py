@@ -31,14 +31,21 @@ def cache_dir() -> Path:
 
 
 # the modules whose code decides the settled state: a change to any of them makes a new key
-_PHYSICS_SOURCES = ("config.py", "layout.py", "world.py", "settle.py", "panda.py")
+_PHYSICS_SOURCES = (
+    "sim/config.py",
+    "sim/layout.py",
+    "sim/world.py",
+    "sim/settle.py",
+    "panda/model.py",
+    "panda/description.py",
+)
 
 
 def _source_digest() -> str:
-    here = Path(__file__).resolve().parent
+    package = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
     for name in _PHYSICS_SOURCES:
-        h.update((here / name).read_bytes())
+        h.update((package / name).read_bytes())
     return h.hexdigest()
 
 

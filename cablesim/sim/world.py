@@ -5,6 +5,13 @@ the RGB-D camera, built from a ``SceneConfig`` and settled before anything is re
     world.step(10)                             # raises PhysicsDivergedError on NaN/instability
     world.hose_vertices(0)                     # (V, 3) world positions of hose 0's rod
 
+Step hooks (as dm_control's composer has ``before_substep``/``after_substep``): callables in
+``world.before_step`` run before every physics step, those in ``world.after_step`` after it;
+each gets the world.  The camera clock and the neighbour perturbation are such hooks::
+
+    with world.hooks(after=[on_step]):
+        robot.move_to(pose)                    # on_step(world) after every physics step
+
 Each hose is a MuJoCo 4.0 1D ``flexcomp`` (rod elasticity, integrator ``discrete``).  The rod is
 built straight (its rest shape), then bent into its start shape through the vertex joints; a
 far end attached to a second connector is held by a ``connect`` equality (SPEC section 9).
@@ -13,6 +20,8 @@ far end attached to a second connector is held by a ``connect`` equality (SPEC s
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import mujoco
@@ -39,6 +48,9 @@ _WARNINGS = (
     mujoco.mjtWarning.mjWARN_CNSTRFULL,
     mujoco.mjtWarning.mjWARN_CONTACTFULL,
 )
+
+
+StepHook = Callable[["World"], None]
 
 
 @dataclass(frozen=True)
@@ -208,6 +220,8 @@ class World:
         self.T_world_camera = T
         self._warn_counts = np.zeros(len(_WARNINGS), int)
         self._settled_state: np.ndarray | None = None
+        self.before_step: list[StepHook] = []
+        self.after_step: list[StepHook] = []
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -218,7 +232,7 @@ class World:
         spec = mujoco.MjSpec.from_string(_scene_xml(cfg, hose_specs, cam))
         panda = panda_base = None
         if cfg.robot.enabled:
-            from cablesim.sim.panda import attach_panda
+            from cablesim.panda.model import attach_panda
 
             yaw = cfg.robot.base_yaw
             quat = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
@@ -255,7 +269,7 @@ class World:
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         if self.panda is not None:
-            from cablesim.sim.panda import set_arm
+            from cablesim.panda.model import set_arm
 
             set_arm(m, d, self.panda, self.cfg.robot.park_qpos)
         mujoco.mj_kinematics(m, d)
@@ -284,11 +298,36 @@ class World:
         return float(self.data.time)
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` physics steps; raise ``PhysicsDivergedError`` if the physics blew up."""
+        """Advance ``n`` physics steps, running the step hooks around each; raise
+        ``PhysicsDivergedError`` if the physics blew up."""
         m, d = self.model, self.data
+        if not (self.before_step or self.after_step):
+            for _ in range(n):
+                mujoco.mj_step(m, d)
+            self.check_diverged()
+            return
         for _ in range(n):
+            for hook in tuple(self.before_step):
+                hook(self)
             mujoco.mj_step(m, d)
-        self.check_diverged()
+            self.check_diverged()
+            for hook in tuple(self.after_step):
+                hook(self)
+
+    @contextmanager
+    def hooks(
+        self, before: Sequence[StepHook] = (), after: Sequence[StepHook] = ()
+    ) -> Iterator[World]:
+        """Run ``before``/``after`` hooks around every physics step inside the block."""
+        self.before_step.extend(before)
+        self.after_step.extend(after)
+        try:
+            yield self
+        finally:
+            for hook in before:
+                self.before_step.remove(hook)
+            for hook in after:
+                self.after_step.remove(hook)
 
     def check_diverged(self) -> None:
         d = self.data

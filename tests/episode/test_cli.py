@@ -7,7 +7,7 @@ import json
 import pytest
 
 from cablesim.cli import main
-from cablesim.episode.recording import Recording
+from cablesim.recording import Recording
 
 
 @pytest.mark.slow

@@ -10,12 +10,11 @@ import numpy as np
 import pytest
 
 from cablesim.camera.replay import ReplayCamera
-from cablesim.episode.config import EpisodeConfig
-from cablesim.episode.recording import Recording, RecordingWriter
-from cablesim.episode.simulate import simulate_episode
 from cablesim.perception.actions import subsample_by_gripper
 from cablesim.perception.frames import LABEL_ROBOT, Frame, Stream
+from cablesim.recording import Recording, RecordingWriter
 from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig
+from cablesim.sim.session import EpisodeConfig, SimSession, simulate_episode
 
 SEED, HOSE, N_HOSES = 2, 1, 3
 
@@ -106,7 +105,7 @@ def test_recording_replays_identically(episode):
     for f in ep.result.stream:
         img = cam.capture()
         assert np.array_equal(img.rgb, f.rgb) and np.array_equal(img.depth, f.depth)
-    assert np.allclose(cam.T_world_camera, ep.world.T_world_camera)
+    assert np.allclose(cam.T_world_camera, ep.session.world.T_world_camera)
 
 
 @pytest.mark.slow
@@ -138,21 +137,14 @@ class FailingWriter(RecordingWriter):
 
 
 def test_interrupted_episode_keeps_frames_written(episode, tmp_path):
-    from cablesim.episode.runner import run_episode
-    from cablesim.robot.sim_panda import SimPanda
-    from cablesim.sim.camera import SimCamera
-    from cablesim.sim.world import World
-
     ep, _ = episode
-    cfg = small_config()
-    world = World.build(cfg.scene_config())
-    cam = SimCamera(world)
+    session = SimSession.build(small_config())
     writer = FailingWriter(tmp_path / "rec", n=6)
     try:
         with pytest.raises(Interrupt), writer:
-            run_episode(world, SimPanda(world), cam, ep.segment.mask, cfg, sink=writer)
+            session.interact(ep.segment.mask, sink=writer)
     finally:
-        cam.close()
+        session.close()
     rec = Recording(tmp_path / "rec")
     assert not rec.complete and len(rec) == 6
     # the first frames of the same seed are the same as in the full episode (without flow)

@@ -3,6 +3,7 @@ is out of the default camera's view; a push runs without grasping."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import mujoco
@@ -10,18 +11,20 @@ import numpy as np
 import pytest
 
 from cablesim.episode import primitives as prim
-from cablesim.episode.config import FALLBACK_RETREAT_QPOS, EpisodeConfig, RetreatConfig
-from cablesim.episode.runner import run_episode
+from cablesim.episode.config import RetreatConfig
+from cablesim.panda import PARK_QPOS
 from cablesim.perception.frames import LABEL_ROBOT
 from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig
+from cablesim.sim.session import EpisodeConfig, SimSession
 
 SEED, N_HOSES = 2, 3
+#: The retract configuration turned away about joint 1: zero robot pixels in the default
+#: camera for joint 1 in [-2.10, -1.70]
+TURNED_AWAY_QPOS = (-1.9, -0.6, 0.0, -2.3, 0.0, 1.7, 0.785398)
 
 
 @pytest.fixture(scope="module")
-def scene():
-    from cablesim.robot.sim_panda import SimPanda
-    from cablesim.sim.camera import SimCamera
+def small_world():
     from cablesim.sim.world import World
 
     cfg = EpisodeConfig(
@@ -30,15 +33,22 @@ def scene():
             hoses=HoseConfig(count=N_HOSES), camera=CameraConfig(width=160, height=120)
         ),
     )
-    world = World.build(cfg.scene_config())
-    cam = SimCamera(world)
-    yield cfg, world, SimPanda(world), cam
-    cam.close()
+    session = SimSession.build(cfg, world=World.build(cfg.scene_config()))
+    yield cfg, session.world, session.camera
+    session.close()
+
+
+@pytest.fixture()
+def scene(small_world):
+    """A fresh session on the settled small scene (world and camera reused)."""
+    cfg, world, camera = small_world
+    session = SimSession.build(cfg, world=world, camera=camera)
+    return cfg, session
 
 
 def test_unreachable_grasp_fails_before_moving(scene):
-    _, world, robot, _ = scene
-    world.reset()
+    _, session = scene
+    world, robot = session.world, session.robot
     t_sim, t0 = world.time, time.perf_counter()
     res = prim.grasp_at(robot, np.array([1.6, 0.9, 1.4]), np.array([0.0, 0.0, 1.0]))
     wall = time.perf_counter() - t0
@@ -48,8 +58,8 @@ def test_unreachable_grasp_fails_before_moving(scene):
 
 
 def test_unreachable_segment_episode_fails_with_reason(scene):
-    cfg, world, robot, cam = scene
-    world.reset()
+    cfg, session = scene
+    world, cam = session.world, session.camera
     # a segment on the far top corner of the board, away from the robot (base at y = -0.62)
     mask = np.zeros((120, 160), bool)
     img = cam.capture()
@@ -60,7 +70,7 @@ def test_unreachable_segment_episode_fails_with_reason(scene):
     mask[v[corner] : v[corner] + 3, u[corner] : u[corner] + 12] = True
     mask &= board
     t_sim = world.time
-    res = run_episode(world, robot, cam, mask, cfg)
+    res = session.interact(mask)
     print(res.summary())
     assert not res.success and "unreachable" in res.reason
     assert res.stream is None
@@ -68,20 +78,22 @@ def test_unreachable_segment_episode_fails_with_reason(scene):
 
 
 def test_segment_input_errors_come_back_as_failures(scene):
-    cfg, world, robot, cam = scene
-    res = run_episode(world, robot, cam, np.zeros((120, 160), bool), cfg)
+    _, session = scene
+    res = session.interact(np.zeros((120, 160), bool))
     assert not res.success and "segment" in res.reason and "empty" in res.reason
 
 
-@pytest.mark.parametrize("qpos", ["scene", "fallback"])
+@pytest.mark.parametrize("qpos", ["scene", "turned away"])
 def test_retreat_configuration_is_out_of_the_default_view(qpos):
     """Zero robot pixels in the default camera (640x480) with the arm at the retreat target."""
+    from cablesim.panda.model import joint_qpos_addresses
     from cablesim.sim.camera import SimCamera
-    from cablesim.sim.panda import joint_qpos_addresses
     from cablesim.sim.world import World
 
     world = World.build(SceneConfig(seed=SEED, hoses=HoseConfig(count=1)))
-    q = RetreatConfig().joint_target(world.cfg) if qpos == "scene" else FALLBACK_RETREAT_QPOS
+    park = tuple(world.cfg.robot.park_qpos)
+    q = RetreatConfig().joint_target(park) if qpos == "scene" else TURNED_AWAY_QPOS
+    assert qpos != "scene" or q == tuple(PARK_QPOS)
     world.data.qpos[joint_qpos_addresses(world.model, world.panda.joints)] = q
     mujoco.mj_forward(world.model, world.data)
     with SimCamera(world) as cam:
@@ -93,15 +105,11 @@ def test_retreat_configuration_is_out_of_the_default_view(qpos):
 
 @pytest.mark.slow
 def test_push_episode(scene):
-    from cablesim.episode.picker import pick_segment
-    from cablesim.sim.layout import rng_streams
-
-    cfg, world, robot, cam = scene
-    world.reset()
-    cfg = cfg.replace(kind="push", hose=1)
-    cfg.actions.periods = 1
-    seg = pick_segment(world, robot, cam, 1, rng_streams(SEED)["episode"], cfg)
-    res = run_episode(world, robot, cam, seg.mask, cfg)
+    cfg, session = scene
+    seg = session.pick_start(1)
+    push = cfg.interaction.replace(kind="push")
+    push.actions = dataclasses.replace(push.actions, periods=1)
+    res = session.interact(seg.mask, push)
     print(res.summary())
     assert res.success, res.reason
     assert res.stream.actions == [0]
@@ -117,11 +125,9 @@ def test_push_episode(scene):
     [
         ({"hose": "1"}, "hose"),
         ({"hose": 9}, "hose"),
-        ({"kind": "pull"}, "kind"),
     ],
 )
 def test_bad_episode_config_names_the_field(change, field) -> None:
-    from cablesim.episode.config import EpisodeConfig
     from cablesim.errors import ConfigError
 
     with pytest.raises(ConfigError) as e:
@@ -139,11 +145,10 @@ def test_bad_episode_config_names_the_field(change, field) -> None:
     ],
 )
 def test_bad_episode_section_values_name_the_field(section, name, value) -> None:
-    from cablesim.episode.config import EpisodeConfig
     from cablesim.errors import ConfigError
 
     cfg = EpisodeConfig()
-    setattr(getattr(cfg, section), name, value)
+    setattr(getattr(cfg.interaction, section), name, value)
     with pytest.raises(ConfigError) as e:
         cfg.validate()
     assert e.value.field == f"{section}.{name}"

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from cablesim.camera.replay import ReplayCamera
-from cablesim.episode.recording import Recording, RecordingWriter, read_stream, write_stream
 from cablesim.errors import RecordingError
 from cablesim.perception.frames import Stream
 from cablesim.perception.synthetic import Region, SyntheticSpec, synthetic_stream
+from cablesim.recording import Recording, RecordingWriter, read_stream, write_stream
 
 
 @pytest.fixture(scope="module")

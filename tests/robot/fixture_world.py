@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 
 from cablesim.errors import PhysicsDivergedError
-from cablesim.sim.panda import attach_panda, set_home
+from cablesim.panda.model import attach_panda, set_home
 
 HOSE_X = 0.56  # hose hangs 4 cm in front of the board face (x = 0.60)
 HOSE_TOP = 0.95

@@ -27,9 +27,10 @@ import mujoco
 import numpy as np
 import pytest
 
+from cablesim.panda import HOME_QPOS, JOINT_LIMITS
+from cablesim.panda.ik import ArmModel
+from cablesim.panda.model import panda_spec
 from cablesim.robot.franky_panda import FLANGE_T_TCP, FrankyPanda, franka_sim_mjcf
-from cablesim.robot.ik import ArmModel
-from cablesim.sim.panda import HOME_QPOS, JOINT_LIMITS, panda_spec
 
 HOST = "127.0.0.1"  # never anything else
 PORTS = (1337, 1338)  # libfranka's arm and gripper ports (fixed by the protocol)

@@ -1,7 +1,7 @@
 import mujoco
 import numpy as np
 
-from cablesim.sim.panda import (
+from cablesim.panda.model import (
     HOME_QPOS,
     JOINT_LIMITS,
     TCP_OFFSET,

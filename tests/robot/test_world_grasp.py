@@ -5,7 +5,7 @@ import pytest
 
 from cablesim.robot.grasping import approach_and_grasp
 from cablesim.robot.pose import grasp_pose
-from cablesim.robot.sim_panda import SimPanda
+from cablesim.sim.sim_panda import SimPanda
 
 
 @pytest.fixture(scope="module")

@@ -151,7 +151,7 @@ def test_robot_pixels_labelled_robot():
     frame rely on this labelling)."""
     import mujoco
 
-    from cablesim.sim.panda import HOME_QPOS, joint_qpos_addresses
+    from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses
 
     world = World.build(
         SceneConfig(seed=0, camera=CameraConfig(width=W, height=H), robot=RobotConfig())

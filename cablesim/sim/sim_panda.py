@@ -23,25 +23,19 @@ import mujoco
 import numpy as np
 
 from cablesim.errors import ConfigError
-from cablesim.robot.base import MoveResult, Robot
-from cablesim.robot.ik import ArmModel, ArmModelChecks, Obstacle, static_obstacles
-from cablesim.robot.pose import Pose
-from cablesim.sim.panda import (
-    JOINT_LIMITS,
-    MAX_OPENING,
+from cablesim.panda.description import JOINT_LIMITS, JOINT_VELOCITY_LIMITS, MAX_OPENING
+from cablesim.panda.ik import ArmModel, ArmModelChecks, Obstacle, static_obstacles
+from cablesim.panda.model import (
     PandaNames,
     joint_qpos_addresses,
     robot_body_ids,
     set_grasp_force,
 )
+from cablesim.robot.base import MoveResult, Robot
+from cablesim.robot.pose import Pose
 
-#: The same arm pose with the hand pointing down (TCP about (0.37, 0, 0.46)): a collision-free
-#: way point between HOME_QPOS (TCP 5 cm from a board at x = 0.6) and poses facing the board.
-RETRACT_QPOS = np.array([0.0, -0.6, 0.0, -2.3, 0.0, 1.7, np.pi / 4])
 #: Velocity feed-forward through the position target: kv / kp of the joint actuators.
 _KV_OVER_KP = 0.1
-#: Franka's nominal joint velocity limits (rad/s).
-JOINT_VELOCITY_LIMITS = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
 
 
 class SimWorld(Protocol):

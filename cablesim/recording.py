@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from cablesim.errors import InputError, RecordingError
+from cablesim.jsonutil import json_default
 from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
 
 FORMAT = "cablesim-recording"
@@ -92,7 +93,7 @@ def _frame_arrays(frame: Frame) -> dict[str, np.ndarray]:
 
 class RecordingWriter:
     """Writes frames (and later their ground-truth flow) as they come; usable as a
-    :class:`~cablesim.episode.capture.FrameSink`."""
+    :class:`~cablesim.episode.truth.FrameSink`."""
 
     def __init__(
         self,
@@ -128,7 +129,7 @@ class RecordingWriter:
             "meta": self.meta,
         }
         _write_atomic(
-            self.path / "meta.json", json.dumps(doc, indent=2, default=_json_default).encode()
+            self.path / "meta.json", json.dumps(doc, indent=2, default=json_default).encode()
         )
 
     def _append_index(self, entry: dict[str, Any]) -> None:
@@ -205,14 +206,6 @@ class RecordingWriter:
     ) -> None:
         # an exception leaves an incomplete (but readable) recording
         self.close(complete=exc_type is None)
-
-
-def _json_default(v: Any) -> Any:
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    if isinstance(v, np.generic):
-        return v.item()
-    return repr(v)
 
 
 def write_stream(stream: Stream, path: str | os.PathLike[str], overwrite: bool = False) -> Path:

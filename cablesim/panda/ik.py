@@ -15,16 +15,9 @@ import mink
 import mujoco
 import numpy as np
 
+from cablesim.panda.description import FORWARD_QPOS, HOME_QPOS, JOINT_LIMITS, MAX_OPENING
+from cablesim.panda.model import PandaNames, attach_panda, joint_qpos_addresses, robot_body_ids
 from cablesim.robot.pose import Pose
-from cablesim.sim.panda import (
-    HOME_QPOS,
-    JOINT_LIMITS,
-    MAX_OPENING,
-    PandaNames,
-    attach_panda,
-    joint_qpos_addresses,
-    robot_body_ids,
-)
 
 _PRIMITIVES = (
     mujoco.mjtGeom.mjGEOM_PLANE,
@@ -109,11 +102,6 @@ class IKResult:
     position_error: float
     rotation_error: float
     iterations: int
-
-
-#: A configuration with the hand pointing along +x (towards the board), elbow up.
-#: Planar, so joint6 = pi/2 + joint2 - joint4; TCP at about (0.49, 0, 0.76) from the base.
-FORWARD_QPOS = np.array([0.0, -0.6, 0.0, -2.3, 0.0, np.pi / 2 + 1.7, np.pi / 4])
 
 
 class ArmModel:

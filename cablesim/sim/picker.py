@@ -29,7 +29,7 @@ from scipy import ndimage
 
 from cablesim.camera.base import Camera
 from cablesim.episode import primitives as prim
-from cablesim.episode.config import EpisodeConfig
+from cablesim.episode.config import InteractionConfig
 from cablesim.errors import InputError, UnreachableError
 from cablesim.perception.frames import LABEL_ROBOT
 from cablesim.perception.geometry import eccentricity, segment_pose
@@ -63,7 +63,7 @@ def pick_segment(
     camera: Camera,
     hose: int,
     rng: np.random.Generator,
-    config: EpisodeConfig | None = None,
+    config: InteractionConfig | None = None,
     half_length: float = 0.03,
     clearance: float = 0.01,
     min_pixels: int = 10,
@@ -74,7 +74,7 @@ def pick_segment(
     max_tries: int = 40,
 ) -> PickedSegment:
     """A random graspable visible segment of ``hose`` in the camera's current image."""
-    cfg = config or EpisodeConfig()
+    cfg = config or InteractionConfig()
     if not 0 <= hose < len(world.hoses):
         raise InputError(f"hose {hose} does not exist (the scene has {len(world.hoses)})")
     image = camera.capture()
@@ -124,19 +124,10 @@ def pick_segment(
         if d > max_axis_error:
             reasons["off the hose in 3D"] += 1
             continue
-        ray = T[:3, :3] @ (sp.centre / np.linalg.norm(sp.centre))
-        g_centre = centre + cfg.grasp.surface_offset * ray
-        g, why = prim.choose_grasp_pose(robot, g_centre, axis, approach, cfg.grasp.pregrasp_offset)
-        if g is None:
-            reasons["unreachable"] += 1
-            continue
-        ok = True
-        for _, u_dir in prim.action_directions(cfg.actions, axis, T, approach):
-            for s in (1.0, -1.0):
-                if not robot.check_reachable(g.translated(s * cfg.actions.amplitude * u_dir))[0]:
-                    ok = False
+        g_centre = prim.grasp_centre(T, sp.centre, cfg.grasp.surface_offset)
+        ok, why = prim.check_interaction(robot, g_centre, axis, cfg, T, approach)
         if not ok:
-            reasons["action end points unreachable"] += 1
+            reasons["action end points unreachable" if "end point" in why else "unreachable"] += 1
             continue
         return PickedSegment(seg, hose, (u, v), centre, tries)
     summary = ", ".join(f"{n}x {r}" for r, n in reasons.most_common())

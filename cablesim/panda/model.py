@@ -13,8 +13,8 @@ prefix.  Robot geoms have ``contype=2, conaffinity=1``: they touch everything in
 has the default ``contype=conaffinity=1`` (table, board, hoses) but not each other.
 
 Public API: :func:`panda_spec`, :func:`attach_panda`, :class:`PandaNames`,
-:func:`robot_body_ids`, :func:`set_home`, :func:`set_grasp_force`, and the constants
-``ARM_JOINTS``, ``HOME_QPOS``, ``JOINT_LIMITS``, ``TCP_OFFSET``.
+:func:`robot_body_ids`, :func:`set_home`, :func:`set_grasp_force`; the numbers come from
+:mod:`cablesim.panda.description`.
 """
 
 from __future__ import annotations
@@ -25,25 +25,17 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-ARM_JOINTS: tuple[str, ...] = tuple(f"joint{i}" for i in range(1, 8))
-FINGER_JOINTS: tuple[str, str] = ("finger_joint1", "finger_joint2")
-HOME_QPOS: np.ndarray = np.array([0.0, 0.0, 0.0, -1.5708, 0.0, 1.5708, 0.7854])
-JOINT_LIMITS: np.ndarray = np.array(
-    [
-        [-2.8973, 2.8973],
-        [-1.7628, 1.7628],
-        [-2.8973, 2.8973],
-        [-3.0718, -0.0698],
-        [-2.8973, 2.8973],
-        [-0.0175, 3.7525],
-        [-2.8973, 2.8973],
-    ]
+from cablesim.panda.description import (
+    ARM_JOINTS,
+    DEFAULT_GRASP_FORCE,
+    FINGER_JOINTS,
+    FINGER_RANGE,
+    HAND_OFFSET,
+    HOME_QPOS,
+    JOINT_LIMITS,
+    MAX_OPENING,
+    TCP_OFFSET,
 )
-FINGER_RANGE = (0.0, 0.04)  # per finger, metres
-MAX_OPENING = 2 * FINGER_RANGE[1]
-TCP_OFFSET = 0.1034  # grasp_site below the hand flange along hand z
-HAND_OFFSET = 0.107  # hand flange below link7 along z
-DEFAULT_GRASP_FORCE = 70.0  # N per finger
 
 _KP = (4500.0, 4500.0, 3500.0, 3500.0, 2000.0, 2000.0, 2000.0)
 _TORQUE = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)

@@ -5,22 +5,19 @@ be labelled.  Contacts perturb neighbours naturally but rarely by much; this mod
 explicit, reproducible disturbance so that the claim "motion correlation beats motion
 segmentation when neighbouring hoses are perturbed" can be tested on purpose.
 
-Mechanism: :class:`PerturbedWorld` wraps a :class:`~cablesim.sim.world.World` (everything is
-delegated to it) and overrides only ``step``.  While an action is being streamed, i.e. while the
-episode runner's :class:`~cablesim.episode.trigger.SimTrigger` hooks this object's ``step``
-(an instance attribute named ``step`` exists), every physics step first sets
-``data.xfrc_applied`` on a few vertex bodies of each perturbed hose: a damped spring pulls each
-vertex towards ``rest + A sin(2 pi (t - t0) / P + phase) e``, where ``rest`` is the vertex's
-position when the action started, ``e`` a unit direction in the board plane and ``A``, ``P``,
-``phase``, ``e`` and the vertices are drawn from the seeded generator at the start of each
-action.  The motion is independent of the gripper (its own period and phase).  When the action
-ends the forces are removed, so release, retreat and settling (and the target frame) are not
-disturbed.  Pass the wrapper wherever the world goes (``SimPanda``, ``SimCamera``,
-``run_episode``)::
+Mechanism: :class:`NeighbourPerturbation` is an action hook of the simulated clock
+(:class:`~cablesim.sim.clock.SimClock`): it runs only while an action is recorded.  At the
+start of each action it draws, from its seeded generator, a few vertex bodies of each perturbed
+hose, an amplitude ``A``, a period ``P``, a phase and a unit direction ``e`` in the board plane;
+before every physics step of the action it sets ``data.xfrc_applied`` on those vertices: a
+damped, capped spring pulls each towards ``rest + A sin(2 pi (t - t0) / P + phase) e``, where
+``rest`` is the vertex's position when the action started.  The motion is independent of the
+gripper (its own period and phase).  When the action ends the forces are removed, so release,
+retreat and settling (and the target frame) are not disturbed::
 
-    pw = PerturbedWorld(world, PerturbConfig(enabled=True), hose_of_interest=2, seed=0)
-    robot, camera = SimPanda(pw), SimCamera(pw)
-    run_episode(pw, robot, camera, segment, cfg)
+    perturbation = NeighbourPerturbation(PerturbConfig(enabled=True), stream(seed, "perturb"))
+    perturbation.hose_of_interest = 2
+    clock = SimClock(world, robot, camera.capture, action_hooks=[perturbation])
 """
 
 from __future__ import annotations
@@ -78,82 +75,40 @@ class _Pull:
     phase: float
 
 
-class PerturbedWorld:
-    """A world whose ``step`` disturbs neighbouring hoses while an action is streamed."""
+class NeighbourPerturbation:
+    """Seeded disturbance of the hoses other than ``hose_of_interest`` during actions."""
 
     def __init__(
         self,
-        world: Any,
         config: PerturbConfig | None = None,
+        rng: np.random.Generator | None = None,
         hose_of_interest: int | None = None,
-        seed: int = 0,
     ) -> None:
-        cfg = (config or PerturbConfig(enabled=True)).validate()
-        object.__setattr__(self, "_world", world)
-        object.__setattr__(self, "perturb", cfg)
-        object.__setattr__(self, "hose_of_interest", hose_of_interest)
-        object.__setattr__(self, "_rng", np.random.default_rng([int(seed), 0x9E37]))
-        object.__setattr__(self, "_pulls", [])
-        object.__setattr__(self, "_t0", 0.0)
-        object.__setattr__(self, "log", [])  # one entry per perturbed action
+        self.config = (config or PerturbConfig(enabled=True)).validate()
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.hose_of_interest = hose_of_interest
+        self.log: list[dict[str, Any]] = []  # one entry per perturbed hose and action
+        self._pulls: list[_Pull] = []
+        self._t0 = 0.0
 
-    # ------------------------------------------------------------------ delegation
-    def __getattr__(self, name: str) -> Any:
-        return getattr(object.__getattribute__(self, "_world"), name)
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if name == "step":  # SimTrigger's hook lives on this wrapper
-            object.__setattr__(self, name, value)
-        else:
-            setattr(self._world, name, value)
-
-    def __delattr__(self, name: str) -> None:
-        if name == "step":
-            object.__delattr__(self, name)
-        else:
-            delattr(self._world, name)
-
-    @property
-    def world(self) -> Any:
-        """The wrapped world."""
-        return self._world
-
-    def set_hose_of_interest(self, hose: int | None) -> None:
-        object.__setattr__(self, "hose_of_interest", hose)
-
-    # ------------------------------------------------------------------ stepping
-    @property
-    def streaming(self) -> bool:
-        """True while a camera trigger hooks ``step`` (an action is being recorded)."""
-        return "step" in vars(self)
-
-    def step(self, n: int = 1) -> None:
-        w = self._world
-        if not (self.perturb.enabled and self.streaming):
-            if self._pulls:
-                self._stop()
-            w.step(n)
-            return
-        if not self._pulls:
-            self._start()
-        for _ in range(int(n)):
-            self._apply()
-            w.step(1)
-
-    def _targets(self) -> list[int]:
-        cfg = self.perturb
-        n = len(self._world.hoses)
+    def _targets(self, world: Any) -> list[int]:
+        cfg = self.config
+        n = len(world.hoses)
         if cfg.hoses is not None:
             return [h for h in cfg.hoses if 0 <= h < n and h != self.hose_of_interest]
         return [h for h in range(n) if h != self.hose_of_interest]
 
-    def _start(self) -> None:
-        cfg, rng, w = self.perturb, self._rng, self._world
-        d = w.data
-        pulls: list[_Pull] = []
+    # ---- action hook ----------------------------------------------------------------------
+    def start(self, world: Any) -> None:
+        """Draw this action's pulls (nothing when disabled)."""
+        self._pulls = []
+        if not self.config.enabled:
+            return
+        cfg, rng = self.config, self.rng
+        d = world.data
         # board plane: the world y and z axes (the board's front face is at constant x)
-        for h in self._targets():
-            bodies = np.asarray(w.hoses[h].vertex_bodies)
+        for h in self._targets(world):
+            bodies = np.asarray(world.hoses[h].vertex_bodies)
             n = len(bodies)
             lo, hi = int(math.floor(cfg.span[0] * (n - 1))), int(math.ceil(cfg.span[1] * (n - 1)))
             free = [k for k in range(lo, hi + 1) if bodies[k] > 0]
@@ -167,7 +122,7 @@ class PerturbedWorld:
             phase = float(rng.uniform(0, 2 * math.pi))
             for k in sorted(int(k) for k in ks):
                 b = int(bodies[k])
-                pulls.append(_Pull(b, d.xpos[b].copy(), e, amp, period, phase))
+                self._pulls.append(_Pull(b, d.xpos[b].copy(), e, amp, period, phase))
             self.log.append(
                 {
                     "time": float(d.time),
@@ -178,14 +133,15 @@ class PerturbedWorld:
                     "direction_world": e.tolist(),
                 }
             )
-        object.__setattr__(self, "_pulls", pulls)
-        object.__setattr__(self, "_t0", float(d.time))
+        self._t0 = float(d.time)
 
-    def _apply(self) -> None:
+    def before_step(self, world: Any) -> None:
+        if not self._pulls:
+            return
         import mujoco  # here, so that importing the config does not import MuJoCo
 
-        cfg, w = self.perturb, self._world
-        m, d = w.model, w.data
+        cfg = self.config
+        m, d = world.model, world.data
         t = float(d.time) - self._t0
         vel = np.zeros(6)
         for p in self._pulls:
@@ -200,8 +156,7 @@ class PerturbedWorld:
                 f *= cfg.max_force / norm
             d.xfrc_applied[p.body, :3] = f
 
-    def _stop(self) -> None:
-        d = self._world.data
+    def stop(self, world: Any) -> None:
         for p in self._pulls:
-            d.xfrc_applied[p.body, :] = 0.0
-        object.__setattr__(self, "_pulls", [])
+            world.data.xfrc_applied[p.body, :] = 0.0
+        self._pulls = []
