@@ -82,6 +82,29 @@ class Clock(Protocol):
     def wait_still(self, cfg) -> StillResult: ...
 
 
+# ---------------------------------------------------------------------- planning
+class PlanningClock:
+    """The clock of a dry run: no frames while the (virtual) arm moves, nothing to wait for;
+    ``grab`` reads the camera."""
+
+    def __init__(self, camera: Camera) -> None:
+        self.camera = camera
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        return time.monotonic() - self._t0
+
+    def grab(self) -> CameraImage:
+        return self.camera.capture()
+
+    @contextlib.contextmanager
+    def streaming(self, on_tick: Callable[[Tick], None]) -> Iterator[None]:
+        yield
+
+    def wait_still(self, cfg) -> StillResult:
+        return StillResult(True, 0.0, 0.0, "dry run: nothing moved")
+
+
 # ---------------------------------------------------------------------- real devices
 @dataclass
 class _PoseSample:
