@@ -21,21 +21,19 @@ the same kind against the ``franka-sim`` server with no hardware.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cablesim.camera.base import Camera, CameraImage
-from cablesim.config import check_positive, from_dict, pretty, to_dict
+from cablesim.camera.base import Camera
+from cablesim.config import Config, check_positive
 from cablesim.episode.clock import PlanningClock, StreamClock
 from cablesim.episode.config import InteractionConfig
-from cablesim.episode.runner import InteractionResult, run_interaction
+from cablesim.episode.session import Session
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
-from cablesim.progress import Say
 from cablesim.robot.base import Robot
 from cablesim.robot.guard import GuardedRobot, SafetyConfig
 
@@ -48,7 +46,7 @@ DEFAULT_OBSTACLES: tuple[tuple[float, ...], ...] = (
 
 
 @dataclass
-class RealConfig:
+class RealConfig(Config):
     """Devices, calibration, safety and the interaction of a real-robot session."""
 
     robot_host: str = "172.16.0.2"
@@ -93,19 +91,6 @@ class RealConfig:
         self.interaction.validate()
         return self
 
-    def replace(self, **changes: Any) -> RealConfig:
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return to_dict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> RealConfig:
-        return from_dict(cls, data)
-
-    def __str__(self) -> str:
-        return pretty(self)
-
 
 def open_camera(spec: str, width: int, height: int, fps: int, T_world_camera: Any) -> Camera:
     """``realsense`` (the first camera), ``realsense:SERIAL`` or ``realsense:FILE.db3``."""
@@ -119,25 +104,17 @@ def open_camera(spec: str, width: int, height: int, fps: int, T_world_camera: An
     )
 
 
-class RealSession:
+class RealSession(Session):
     """See the module docstring; build with :meth:`open` (or from devices you opened)."""
 
     def __init__(
-        self,
-        cfg: RealConfig,
-        robot: Robot,
-        camera: Camera,
-        clock: Any,
-        T_world_camera: np.ndarray,
-        dry_run: bool = False,
+        self, cfg: RealConfig, robot: Robot, camera: Camera, clock: Any, dry_run: bool = False
     ) -> None:
         self.cfg = cfg
         self.robot = robot
         self.camera = camera
         self.clock = clock
-        self.T_world_camera = np.asarray(T_world_camera, float)
         self.dry_run = dry_run
-        self.hose: int | None = None  # unknown on a real robot
 
     @classmethod
     def open(cls, cfg: RealConfig, dry_run: bool = False) -> RealSession:
@@ -172,51 +149,14 @@ class RealSession:
             clock: Any = PlanningClock(camera)
         else:
             clock = StreamClock(robot, camera)
-        return cls(cfg, robot, camera, clock, cal.T_world_camera, dry_run)
+        return cls(cfg, robot, camera, clock, dry_run)
 
-    # ---- what the runner and the exploration loop use ---------------------------------------
     @property
     def park(self) -> tuple[float, ...]:
         return tuple(self.cfg.park_qpos)
-
-    def capture(self) -> CameraImage:
-        return self.camera.capture()
-
-    def evaluator(self) -> None:
-        """No ground truth on a real robot."""
-        return None
-
-    def interact(
-        self,
-        segment: Any,
-        interaction: InteractionConfig | None = None,
-        sink: Any = None,
-        say: Say | None = None,
-    ) -> InteractionResult:
-        return run_interaction(
-            self.robot,
-            self.camera,
-            self.clock,
-            segment,
-            interaction or self.cfg.interaction,
-            truth=None,
-            sink=sink,
-            say=say,
-            park=self.park,
-        )
-
-    def stop(self) -> None:
-        """Stop the robot now (Ctrl-C)."""
-        self.robot.stop()
 
     def close(self) -> None:
         self.camera.close()
         close = getattr(getattr(self.robot, "robot", None), "close", None)
         if callable(close):
             close()
-
-    def __enter__(self) -> RealSession:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

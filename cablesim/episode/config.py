@@ -11,11 +11,9 @@ hose, perturbation) holds one of these; so does a real-robot exploration.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
 
-from cablesim.config import check_positive, from_dict, pretty, to_dict
+from cablesim.config import Config, check_positive
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
 
@@ -152,7 +150,7 @@ class RetreatConfig:
 
 
 @dataclass
-class InteractionConfig:
+class InteractionConfig(Config):
     """One interaction: grasp (or push), actions, capture, retreat."""
 
     kind: str = "grasp"  # "grasp" or "push"
@@ -171,16 +169,3 @@ class InteractionConfig:
         self.capture.validate()
         self.retreat.validate()
         return self
-
-    def replace(self, **changes: Any) -> InteractionConfig:
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return to_dict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> InteractionConfig:
-        return from_dict(cls, data)
-
-    def __str__(self) -> str:
-        return pretty(self)

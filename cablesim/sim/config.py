@@ -7,11 +7,9 @@ z up.  The board's front face is the plane x = ``board.x``; connectors stick out
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
 
-from cablesim.config import check_positive, check_range, from_dict, pretty, to_dict
+from cablesim.config import Config, check_positive, check_range
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
 
@@ -180,7 +178,7 @@ class PhysicsConfig:
 
 
 @dataclass
-class SceneConfig:
+class SceneConfig(Config):
     """Everything that defines a scene; ``seed`` draws the random parts."""
 
     seed: int = 0
@@ -205,16 +203,3 @@ class SceneConfig:
                 f"the board has {len(self.board.connectors)}",
             )
         return self
-
-    def replace(self, **changes: Any) -> SceneConfig:
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return to_dict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> SceneConfig:
-        return from_dict(cls, data)
-
-    def __str__(self) -> str:
-        return pretty(self)
