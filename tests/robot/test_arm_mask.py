@@ -50,7 +50,8 @@ def session():
 def test_kinematic_mask_matches_the_simulated_robot_labels(session):
     cam, robot = session.camera, session.robot
     base = Pose(*session.world.panda_base)
-    with ArmMasker(cam.intrinsics, cam.T_world_camera, base) as masker:
+    with ArmMasker.for_robot(robot, cam) as masker:
+        assert np.allclose(masker.T_world_base, base.matrix())
         parked = masker(robot.joint_positions, robot.gripper_opening)
         assert not parked.any()  # the park pose is out of view, in both
         assert not (cam.render_labels() == LABEL_ROBOT).any()
@@ -104,6 +105,8 @@ def test_bad_input_is_named():
             masker(np.zeros(6), 0.08)
     with pytest.raises(InputError, match="margin"):
         dilate(np.zeros((4, 4), bool), -2)
+    with pytest.raises(InputError, match="no arm model"):
+        ArmMasker.for_robot(object(), None)
 
 
 def test_frames_carry_the_mask_into_recordings(tmp_path):
