@@ -23,11 +23,16 @@ OpenCV +z, up = OpenCV -y, and an asymmetric frustum whose edges are the image b
 (``u = -0.5`` and ``u = W - 0.5``, ``v = -0.5`` and ``v = H - 0.5``) at the near plane.  MuJoCo's
 ``frustum_width`` is the frustum's *half* width (measured: the projection of points matches the
 pinhole model to 0.05 px with it; see ``tests/robot/test_arm_mask.py``).
+
+Threads.  A masker may be called from any thread (a real camera's frames arrive on a capture
+thread): its OpenGL work runs on one private thread, calls are serialised.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import cv2
@@ -96,8 +101,12 @@ class ArmMasker:
         is_arm = np.zeros(m.ngeom, bool)
         is_arm[np.isin(m.geom_bodyid, robot_body_ids(m, PREFIX))] = True
         self._is_arm_geom = is_arm
-        self._renderer: mujoco.Renderer | None = mujoco.Renderer(m, h, w)
-        self._renderer.enable_segmentation_rendering()
+        # An OpenGL context is current in one thread at a time (EGL refuses another: a real
+        # camera's frames arrive on a capture thread), so one private thread does all the GL
+        # work: it creates the renderer, renders every mask and frees it.
+        self._gl = ThreadPoolExecutor(max_workers=1, thread_name_prefix="cablesim-arm-mask")
+        self._lock = threading.Lock()
+        self._renderer: mujoco.Renderer | None = self._gl.submit(self._new_renderer, h, w).result()
         self._option = mujoco.MjvOption()
         self._option.sitegroup[:] = 0
         self._option.flags[mujoco.mjtVisFlag.mjVIS_TENDON] = False
@@ -126,12 +135,27 @@ class ArmMasker:
             raise InputError(f"joints must be 7 finite angles, got {np.asarray(joints).shape}")
         if not np.isfinite(opening):
             raise InputError(f"opening must be finite, got {opening!r}")
+        margin = self.margin if margin is None else int(margin)
+        if margin < 0:
+            raise InputError(f"margin must be >= 0 pixels, got {margin}")
+        with self._lock:
+            if self._renderer is None:
+                raise InputError("the arm masker was closed")
+            mask = self._gl.submit(self._render, q, float(opening)).result()
+        return dilate(mask, margin)
+
+    def _new_renderer(self, height: int, width: int) -> mujoco.Renderer:
+        r = mujoco.Renderer(self.model, height, width)
+        r.enable_segmentation_rendering()
+        return r
+
+    def _render(self, q: np.ndarray, opening: float) -> np.ndarray:
+        """The undilated mask (on the GL thread)."""
         r = self._renderer
-        if r is None:
-            raise InputError("the arm masker was closed")
+        assert r is not None
         m, d = self.model, self.data
         d.qpos[self._arm_qadr] = q
-        d.qpos[self._finger_qadr] = np.clip(0.5 * float(opening), *FINGER_RANGE)
+        d.qpos[self._finger_qadr] = np.clip(0.5 * opening, *FINGER_RANGE)
         mujoco.mj_kinematics(m, d)
         r.update_scene(d, camera=-1, scene_option=self._option)
         self._set_camera(r.scene)
@@ -140,7 +164,7 @@ class ArmMasker:
         geom = (objtype == int(mujoco.mjtObj.mjOBJ_GEOM)) & (objid >= 0)
         mask = np.zeros(objid.shape, bool)
         mask[geom] = self._is_arm_geom[objid[geom]]
-        return dilate(mask, self.margin if margin is None else int(margin))
+        return mask
 
     def for_tick(self, tick: Any) -> np.ndarray:
         """The mask of a clock tick (:class:`cablesim.episode.clock.Tick`: ``.joints``,
@@ -168,9 +192,11 @@ class ArmMasker:
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        with self._lock:
+            r, self._renderer = self._renderer, None
+            if r is not None:
+                self._gl.submit(r.close).result()
+                self._gl.shutdown()
 
     def __enter__(self) -> ArmMasker:
         return self

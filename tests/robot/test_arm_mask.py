@@ -93,6 +93,24 @@ def test_non_square_and_off_centre_intrinsics():
     assert _iou(arm_mask(q, 0.08, mirrored, T), b) < 0.8
 
 
+def test_masks_from_another_thread():
+    """A real camera's ticks arrive on a capture thread: the masker renders there too (an EGL
+    context current in the main thread cannot be made current in another)."""
+    import threading
+
+    K = Intrinsics(150.0, 150.0, 79.5, 59.5, 160, 120)
+    T = _look_at((1.3, 0.5, 0.8), (0.45, 0.0, 0.45))
+    with ArmMasker(K, T) as masker:
+        here = masker(HOME_QPOS, 0.08)
+        there: list = []
+        t = threading.Thread(target=lambda: there.append(masker(HOME_QPOS, 0.08)))
+        t.start()
+        t.join()
+        assert len(there) == 1 and here.any() and np.array_equal(here, there[0])
+    with pytest.raises(InputError, match="closed"):
+        masker(HOME_QPOS, 0.08)
+
+
 def test_bad_input_is_named():
     K = Intrinsics(100.0, 100.0, 31.5, 23.5, 64, 48)
     T = _look_at((1.3, 0.5, 0.8), (0.45, 0.0, 0.45))
