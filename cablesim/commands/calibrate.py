@@ -76,6 +76,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--flush-frames", type=int, default=None, help="frames dropped before each image"
     )
     p.add_argument("--no-realtime", action="store_true", help="franky: no realtime kernel")
+    p.add_argument(
+        "--table-z",
+        type=float,
+        default=0.0,
+        help="franky: height of the table top in the world (m, default 0), an obstacle of the "
+        "reachability check",
+    )
+    p.add_argument("--no-table", action="store_true", help="franky: no table obstacle")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -162,7 +170,11 @@ def _sim_devices(args: argparse.Namespace) -> tuple[Any, Any, Any, np.ndarray, d
 
 def _real_devices(args: argparse.Namespace) -> tuple[Any, Any, Any, np.ndarray | None, dict]:
     from cablesim.camera.realsense import RealSenseCamera
+    from cablesim.panda.ik import Obstacle
     from cablesim.robot.franky_panda import FrankyPanda
+
+    table = Obstacle.box("table", (0.0, 0.0, args.table_z - 0.02), (1.5, 1.5, 0.02))
+    obstacles = [] if args.no_table else [table]
 
     _, _, serial = args.camera.partition(":")
     camera = RealSenseCamera(width=args.width, height=args.height, serial=serial or None)
@@ -170,7 +182,11 @@ def _real_devices(args: argparse.Namespace) -> tuple[Any, Any, Any, np.ndarray |
     try:
         # the camera pose is what we are about to measure: the robot gets a placeholder
         robot = FrankyPanda(
-            args.robot_host, np.eye(4), T_world_base=base, realtime=not args.no_realtime
+            args.robot_host,
+            np.eye(4),
+            T_world_base=base,
+            obstacles=obstacles,
+            realtime=not args.no_realtime,
         )
     except BaseException:
         camera.close()
