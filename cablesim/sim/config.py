@@ -152,12 +152,19 @@ class RobotConfig:
     # where the arm waits: away from the hoses and out of the default camera's view (the scene
     # starts and settles with the arm here; ``SimPanda`` retreats here before a target frame)
     park_qpos: tuple[float, ...] = PARK_QPOS
+    # a ChArUco board (cablesim.calibration.BoardSpec's default, at its nominal mount) welded
+    # to the hand, visual only: the simulated set-up of ``cablesim calibrate``
+    hand_board: bool = False
 
     def validate(self) -> None:
         if len(self.base_position) != 3:
             raise ConfigError("robot.base_position", "expected (x, y, z)")
         if len(self.park_qpos) != 7:
             raise ConfigError("robot.park_qpos", f"expected 7 joint angles, got {self.park_qpos}")
+        if not isinstance(self.hand_board, bool):
+            raise ConfigError("robot.hand_board", f"must be true or false, got {self.hand_board!r}")
+        if self.hand_board and not self.enabled:
+            raise ConfigError("robot.hand_board", "a board in the hand needs the robot (enabled)")
 
 
 @dataclass

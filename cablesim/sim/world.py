@@ -240,6 +240,10 @@ class World:
                 spec, pos=tuple(cfg.robot.base_position), quat=quat, prefix="panda/"
             )
             panda_base = (np.array(cfg.robot.base_position, float), np.array(quat))
+            if cfg.robot.hand_board:
+                from cablesim.sim.hand_board import add_hand_board
+
+                add_hand_board(spec, panda)
         try:
             model = spec.compile()
         except Exception as e:  # pragma: no cover - names the failing part for the user
