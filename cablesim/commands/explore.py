@@ -21,6 +21,7 @@ recall, F_0.4, IoU per interaction and merged where ground truth exists; the con
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -179,6 +180,10 @@ def real_config(args: argparse.Namespace, cfg: ExploreConfig):
     if args.calibration is None:
         raise InputError("--robot franky needs --calibration FILE (cablesim calibrate)")
     interaction = cfg.episode_config().interaction
+    # the frame stream carries the arm's mask (the arm model through the calibrated camera)
+    interaction = interaction.replace(
+        capture=dataclasses.replace(interaction.capture, arm_masks=True)
+    )
     return RealConfig(
         robot_host=args.robot_host,
         camera=args.camera,

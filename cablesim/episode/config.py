@@ -88,9 +88,18 @@ class CaptureConfig:
     frame_rate: float = 15.0  # frames per second of simulated time (RealSense rate)
     min_gripper_step: float = 0.001  # delta_g in metres; 0 keeps every frame
     ground_truth: bool = True  # labels and flow in FrameTruth (simulation only)
+    # the arm model rendered at each frame's joint state through the camera: Frame.arm_mask
+    # (on with the real robot; ~20 ms per 640x480 frame, so off by default in simulation)
+    arm_masks: bool = False
+    arm_mask_margin: int = 3  # pixels the arm mask is dilated by
 
     def validate(self) -> None:
         check_positive("capture.frame_rate", self.frame_rate)
+        if isinstance(self.arm_mask_margin, bool) or not isinstance(self.arm_mask_margin, int):
+            raise ConfigError(
+                "capture.arm_mask_margin", f"must be an integer, got {self.arm_mask_margin!r}"
+            )
+        check_positive("capture.arm_mask_margin", self.arm_mask_margin, allow_zero=True)
         check_positive("capture.min_gripper_step", self.min_gripper_step, allow_zero=True)
 
 

@@ -68,7 +68,22 @@ class Session:
             say=say,
             hose=self.hose,
             park=self.park,
+            arm_mask=self.arm_masker(interaction or self.cfg.interaction),
         )
+
+    def arm_masker(self, interaction: InteractionConfig) -> Any:
+        """``(tick) -> mask`` of the arm model through the camera when the interaction asks
+        for arm masks (built once per session), else None."""
+        if not interaction.capture.arm_masks:
+            return None
+        margin = interaction.capture.arm_mask_margin
+        key = (id(self.robot), id(self.camera), margin)
+        if getattr(self, "_arm_masker_key", None) != key:
+            from cablesim.panda.arm_mask import ArmMasker
+
+            self._arm_masker = ArmMasker.for_robot(self.robot, self.camera, margin)
+            self._arm_masker_key = key
+        return self._arm_masker.for_tick
 
     def stop(self) -> None:
         """Stop the robot now (Ctrl-C)."""
