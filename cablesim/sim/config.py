@@ -14,6 +14,7 @@ from typing import Any
 from cablesim.config import check_positive, check_range, from_dict, pretty, to_dict
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
+from cablesim.panda.visuals import check_visual
 
 BACKGROUNDS = ("wood", "bushes", "cables", "solid")
 
@@ -154,12 +155,19 @@ class RobotConfig:
     # where the arm waits: away from the hoses and out of the default camera's view (the scene
     # starts and settles with the arm here; ``SimPanda`` retreats here before a target frame)
     park_qpos: tuple[float, ...] = PARK_QPOS
+    # how the arm is drawn: "primitive" (the capsules and boxes it collides with) or "mesh"
+    # (franka_ros's visual meshes); it collides through the primitives either way, so the
+    # physics is the same bit for bit (cablesim.panda.visuals).  The meshed shoulder is wider:
+    # at this base position it shows at the right edge of the default camera in every park
+    # pose, so "mesh" adds a static robot strip to every frame (~950 px at 640x480)
+    visual: str = "primitive"
 
     def validate(self) -> None:
         if len(self.base_position) != 3:
             raise ConfigError("robot.base_position", "expected (x, y, z)")
         if len(self.park_qpos) != 7:
             raise ConfigError("robot.park_qpos", f"expected 7 joint angles, got {self.park_qpos}")
+        check_visual(self.visual, "robot.visual")
 
 
 @dataclass
