@@ -20,6 +20,7 @@ SUBCOMMANDS: dict[str, str] = {
     "scene": "build and settle a scene, render RGB/depth/labels, move a hose, write GT flow",
     "episode": "one interaction: grasp a hose, periodic actions, retreat, target frame, record",
     "explore": "explore a hose: grasps, motion correlation, grasp sampler, merged votes, metrics",
+    "view": "write a rerun recording (.rrd) of a recording or run folder, or open one",
 }
 
 
