@@ -21,6 +21,7 @@ SUBCOMMANDS: dict[str, str] = {
     "episode": "one interaction: grasp a hose, periodic actions, retreat, target frame, record",
     "explore": "explore a hose: grasps, motion correlation, grasp sampler, merged votes, metrics",
     "calibrate": "eye-to-hand camera calibration with a ChArUco board in the gripper",
+    "view": "write a rerun recording (.rrd) of a recording or run folder, or open one",
 }
 
 

@@ -293,7 +293,7 @@ class HoseExploreEnv(gym.Env):
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array" or self._image is None:
             return None
-        from cablesim.policies.report import overlay_votes
+        from cablesim.viz import overlay_votes
 
         votes = self._merger.votes if self._merger.votes is not None else None
         img = self._image.rgb if votes is None else overlay_votes(self._image.rgb, votes)

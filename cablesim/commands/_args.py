@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from cablesim.panda.visuals import VISUALS
 from cablesim.sim.config import SceneConfig
 
 
@@ -15,6 +16,12 @@ def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed
     p.add_argument("--hoses", type=int, default=None, help="number of hoses (default 4)")
     p.add_argument("--width", type=int, default=None, help="image width (default 640)")
     p.add_argument("--height", type=int, default=None, help="image height (default 480)")
+    p.add_argument(
+        "--robot-visual",
+        choices=VISUALS,
+        default=None,
+        help="how the arm is drawn: primitive (default) or mesh (franka_ros's meshes; same physics)",
+    )
 
 
 def add_interaction_arguments(p: argparse.ArgumentParser) -> None:
@@ -31,6 +38,8 @@ def apply_scene_arguments(scene: SceneConfig, args: argparse.Namespace) -> Scene
         scene.camera.width = args.width
     if getattr(args, "height", None) is not None:
         scene.camera.height = args.height
+    if getattr(args, "robot_visual", None) is not None:
+        scene.robot.visual = args.robot_visual
     return scene
 
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from cablesim.config import Config, check_positive, check_range
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
+from cablesim.panda.visuals import check_visual
 
 BACKGROUNDS = ("wood", "bushes", "cables", "solid")
 
@@ -155,6 +156,12 @@ class RobotConfig:
     # a ChArUco board (cablesim.calibration.BoardSpec's default, at its nominal mount) welded
     # to the hand, visual only: the simulated set-up of ``cablesim calibrate``
     hand_board: bool = False
+    # how the arm is drawn: "primitive" (the capsules and boxes it collides with) or "mesh"
+    # (franka_ros's visual meshes); it collides through the primitives either way, so the
+    # physics is the same bit for bit (cablesim.panda.visuals).  The meshed shoulder is wider:
+    # at this base position it shows at the right edge of the default camera in every park
+    # pose, so "mesh" adds a static robot strip to every frame (~950 px at 640x480)
+    visual: str = "primitive"
 
     def validate(self) -> None:
         if len(self.base_position) != 3:
@@ -165,6 +172,7 @@ class RobotConfig:
             raise ConfigError("robot.hand_board", f"must be true or false, got {self.hand_board!r}")
         if self.hand_board and not self.enabled:
             raise ConfigError("robot.hand_board", "a board in the hand needs the robot (enabled)")
+        check_visual(self.visual, "robot.visual")
 
 
 @dataclass

@@ -246,6 +246,10 @@ class World:
                 add_hand_board(spec, panda)
         try:
             model = spec.compile()
+            if panda is not None and cfg.robot.visual == "mesh":
+                from cablesim.panda.visuals import add_mesh_visuals_same_view
+
+                model = add_mesh_visuals_same_view(spec, model, prefix="panda/")
         except Exception as e:  # pragma: no cover - names the failing part for the user
             raise PhysicsDivergedError(f"the scene failed to compile: {e}") from e
         hoses = []
