@@ -24,7 +24,9 @@ __all__ = ["GRADES", "Evaluator", "f04_reward", "scores_dict"]
 
 
 def scores_dict(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
-    """Precision, recall, F_0.4, F_1, IoU and pixel counts of ``pred`` against ``truth``."""
+    """Precision, recall, F_0.4, F_1, IoU and pixel counts of ``pred`` against ``truth``
+    (SPEC section 7's convention: NaN precision for an empty prediction; F and IoU are NaN
+    only when prediction and truth are both empty)."""
     s = score_mask(pred, truth)
     return {
         "precision": s.precision,
@@ -38,8 +40,10 @@ def scores_dict(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
 
 
 def f04_reward(before: dict[str, float], after: dict[str, float]) -> float:
-    """The environment's reward: the gain in F_0.4 of the merged mask."""
-    return float(after["f0.4"] - before.get("f0.4", 0.0))
+    """The environment's reward: the gain in F_0.4 of the merged mask (an undefined F_0.4,
+    with nothing to find and nothing found, counts as 0)."""
+    a, b = after["f0.4"], before.get("f0.4", 0.0)
+    return float((0.0 if np.isnan(a) else a) - (0.0 if np.isnan(b) else b))
 
 
 class Evaluator:
