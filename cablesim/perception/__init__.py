@@ -5,7 +5,7 @@ Plain NumPy/OpenCV; torch is imported lazily by the RAFT back end only; MuJoCo n
 Typical use::
 
     from cablesim.perception import segment_stream, DISFlow, GraspSampler
-    seg = segment_stream(stream, method="correlation", flow=DISFlow())
+    seg = segment_stream(stream, method="correlation", flow=DISFlow())   # or "published", ...
     votes = seg.votes                       # actions supporting each target pixel
     res = GraspSampler(reachability=robot_check).propose(votes, target.depth, target.intrinsics)
 """
@@ -31,6 +31,7 @@ from cablesim.perception.flow import (
     make_flow,
     texture_mask,
 )
+from cablesim.perception.flow_region import FlowRegion, RegionFlow
 from cablesim.perception.formats import (
     read_flow_png,
     read_sequence,
@@ -65,12 +66,17 @@ from cablesim.perception.metrics import (
     MaskScores,
     confusion,
     f_beta,
+    f_beta_counts,
     flow_epe,
     grade_proposal,
     mean_scores,
+    movingcables_frame,
+    movingcables_summary,
+    nanmean,
     score_mask,
 )
 from cablesim.perception.pipeline import (
+    CURRENT_METHODS,
     METHODS,
     StreamSegmentation,
     StreamStatistics,
@@ -79,6 +85,13 @@ from cablesim.perception.pipeline import (
     masks_from_statistics,
     segment_from_statistics,
     segment_stream,
+)
+from cablesim.perception.published import (
+    PUBLISHED_METHODS,
+    PUBLISHED_THRESHOLDS,
+    PublishedParams,
+    PublishedResult,
+    PublishedSegmentationResult,
 )
 from cablesim.perception.segmentation import (
     SegmentationAccumulator,
@@ -96,10 +109,13 @@ from cablesim.perception.votes import (
 
 __all__ = [
     "BETAS",
+    "CURRENT_METHODS",
     "GRADES",
     "LABEL_BACKGROUND",
     "LABEL_ROBOT",
     "METHODS",
+    "PUBLISHED_METHODS",
+    "PUBLISHED_THRESHOLDS",
     "TARGET_ACTION",
     "AblationParams",
     "Candidate",
@@ -109,6 +125,7 @@ __all__ = [
     "DISFlow",
     "FarnebackFlow",
     "FlowEstimator",
+    "FlowRegion",
     "Frame",
     "FrameTruth",
     "GateParams",
@@ -118,6 +135,10 @@ __all__ = [
     "Intrinsics",
     "MaskScores",
     "OracleFlow",
+    "PublishedParams",
+    "PublishedResult",
+    "PublishedSegmentationResult",
+    "RegionFlow",
     "SamplingResult",
     "SegmentPose",
     "SegmentationAccumulator",
@@ -133,6 +154,7 @@ __all__ = [
     "confusion",
     "eccentricity",
     "f_beta",
+    "f_beta_counts",
     "flow_epe",
     "geometric_median",
     "grade_proposal",
@@ -142,10 +164,13 @@ __all__ = [
     "make_flow",
     "masks_from_statistics",
     "mean_scores",
-    "merge_votes",
-    "moments_to_result",
+    "movingcables_frame",
+    "movingcables_summary",
+    "nanmean",
     "read_flow_png",
     "read_sequence",
+    "merge_votes",
+    "moments_to_result",
     "score_mask",
     "segment_from_statistics",
     "segment_pose",
