@@ -32,12 +32,6 @@ from cablesim.perception.flow import (
     texture_mask,
 )
 from cablesim.perception.flow_region import FlowRegion, RegionFlow
-from cablesim.perception.formats import (
-    read_flow_png,
-    read_sequence,
-    write_flow_png,
-    write_sequence,
-)
 from cablesim.perception.frames import (
     LABEL_BACKGROUND,
     LABEL_ROBOT,
@@ -167,8 +161,6 @@ __all__ = [
     "movingcables_frame",
     "movingcables_summary",
     "nanmean",
-    "read_flow_png",
-    "read_sequence",
     "merge_votes",
     "moments_to_result",
     "score_mask",
@@ -181,6 +173,4 @@ __all__ = [
     "tuning_table",
     "union",
     "vote_image",
-    "write_flow_png",
-    "write_sequence",
 ]
