@@ -20,6 +20,7 @@ SUBCOMMANDS: dict[str, str] = {
     "scene": "build and settle a scene, render RGB/depth/labels, move a hose, write GT flow",
     "episode": "one interaction: grasp a hose, periodic actions, retreat, target frame, record",
     "explore": "explore a hose: grasps, motion correlation, grasp sampler, merged votes, metrics",
+    "segment": "run perception on a recorded interaction (any layout): votes, masks, scores",
 }
 
 
