@@ -22,6 +22,7 @@ SUBCOMMANDS: dict[str, str] = {
     "explore": "explore a hose: grasps, motion correlation, grasp sampler, merged votes, metrics",
     "calibrate": "eye-to-hand camera calibration with a ChArUco board in the gripper",
     "view": "write a rerun recording (.rrd) of a recording or run folder, or open one",
+    "segment": "run perception on a recorded interaction (any layout): votes, masks, scores",
 }
 
 

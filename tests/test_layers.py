@@ -1,7 +1,7 @@
 """The house's seams: what each layer may import (checked module by module in a fresh
 interpreter).
 
-- ``perception`` and ``camera``: neither the simulator (``cablesim.sim``, MuJoCo) nor any layer
+- ``perception``, ``formats`` and ``camera``: neither the simulator (``cablesim.sim``, MuJoCo) nor any layer
   above them (``episode``, ``policies``, ``envs``);
 - ``robot``: nothing of the simulator, ``episode``, ``policies`` or ``envs`` (the real arm
   reads the Panda's description in ``cablesim.panda``, whose arm-only kinematics model uses
@@ -22,6 +22,7 @@ ABOVE = ("cablesim.episode", "cablesim.policies", "cablesim.envs")
 SIM = ("cablesim.sim",)
 RULES = {
     "cablesim.perception": SIM + ABOVE + ("mujoco",),
+    "cablesim.formats": SIM + ABOVE + ("mujoco",),
     "cablesim.camera": SIM + ABOVE + ("mujoco",),
     "cablesim.robot": SIM + ABOVE,
     "cablesim.episode": SIM + ("cablesim.policies", "cablesim.envs"),
