@@ -282,6 +282,7 @@ class Exploration:
             say,
         )
         self.record_to = None if record_to is None else Path(record_to)
+        self.published: list[str] = []  # sequences written in the published layout
         self.interaction_cfg = session.cfg.interaction
         self.T = np.asarray(session.T_world_camera, float)
         self.flow = make_flow(cfg.flow, **(flow_kwargs or {}))
@@ -382,7 +383,26 @@ class Exploration:
         final = dict(ep.stream.meta) if ep.stream is not None else {}
         final["result"] = ep.to_dict()
         writer.close(final, complete=ep.success)
+        if ep.stream is not None:
+            self._write_published(k, ep.stream)
         return ep
+
+    def _write_published(self, k: int, stream: Stream) -> None:
+        """The interaction again in the published motion-correlation layout (SPEC 8), with the
+        exploration's sequences listed as one multi-grasp group."""
+        from cablesim.formats.mcor import write_mcor, write_multigrasp
+
+        assert self.record_to is not None
+        masks = [f.arm_mask for f in stream.frames]
+        write_mcor(
+            self.record_to / "mcor" / f"interaction{k}",
+            stream,
+            segment=self.segment,
+            arm_masks=dict(enumerate(masks)) if all(m is not None for m in masks) else None,
+            base_to_camera=np.linalg.inv(self.T) @ self.session.T_world_base,
+        )
+        self.published.append(f"interaction{k}")
+        write_multigrasp(self.record_to / "mcor" / "multigrasp_sequences.json", [self.published])
 
     def _centre_in_camera(self, ep: Any) -> np.ndarray | None:
         if ep.centre is not None:

@@ -38,6 +38,13 @@ class Session:
         return np.asarray(T if T is not None else self.robot.T_world_camera, float)
 
     @property
+    def T_world_base(self) -> np.ndarray:
+        """The robot base in the world (from the arm model the robot plans on)."""
+        arm = getattr(self.robot, "arm", None)
+        base = getattr(arm, "base", None)
+        return np.eye(4) if base is None else base.matrix()
+
+    @property
     def park(self) -> tuple[float, ...]:
         """The joint configuration out of the camera's view."""
         return tuple(PARK_QPOS)
