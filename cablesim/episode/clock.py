@@ -13,8 +13,10 @@ frames a clock delivers meanwhile.  A clock has four parts:
 (the gripper pose is read at the same physics step, skew 0) and waits by settling the physics.
 :class:`StreamClock` here serves real devices: the camera's own stream is read on a capture
 thread while franky moves the arm, a second thread samples the robot's state, and each frame is
-paired with the pose sample nearest its arrival time (the skew is recorded).  Stillness is
-judged from consecutive RGB and depth frames.
+paired with the pose sample nearest its arrival time (the skew is recorded).  The finger
+opening is read on a third thread: a franky gripper read blocks until the hand's next state
+packet (60 Hz on franka-sim), which would otherwise hold every pose sample back to that rate.
+Stillness is judged from consecutive RGB and depth frames.
 """
 
 from __future__ import annotations
@@ -169,21 +171,34 @@ class StreamClock:
     def grab(self) -> CameraImage:
         return self.camera.capture()
 
-    def _sample(self) -> _PoseSample:
+    def _sample(self, opening: float) -> _PoseSample:
+        """The arm's state now, timed at the middle of the reads."""
         r = self.robot
-        return _PoseSample(self.now(), r.ee_pose(), float(r.gripper_opening), r.joint_positions)
+        t0 = self.now()
+        pose, joints = r.ee_pose(), r.joint_positions
+        return _PoseSample(0.5 * (t0 + self.now()), pose, opening, joints)
 
     @contextlib.contextmanager
     def streaming(self, on_tick: Callable[[Tick], None]) -> Iterator[None]:
         stop = threading.Event()
         lock = threading.Lock()
-        samples: list[_PoseSample] = [self._sample()]
+        opening = [float(self.robot.gripper_opening)]
+        samples: list[_PoseSample] = [self._sample(opening[0])]
         errors: list[BaseException] = []
+
+        def read_opening() -> None:
+            try:
+                while not stop.is_set():
+                    opening[0] = float(self.robot.gripper_opening)
+                    stop.wait(self.pose_period)
+            except BaseException as e:  # noqa: BLE001 - handed to the main thread
+                errors.append(e)
+                stop.set()
 
         def sample_poses() -> None:
             try:
                 while not stop.is_set():
-                    s = self._sample()
+                    s = self._sample(opening[0])
                     with lock:
                         samples.append(s)
                         while samples and samples[0].time < s.time - self.history:
@@ -214,6 +229,7 @@ class StreamClock:
 
         threads = [
             threading.Thread(target=sample_poses, name="cablesim-poses", daemon=True),
+            threading.Thread(target=read_opening, name="cablesim-gripper", daemon=True),
             threading.Thread(target=capture_frames, name="cablesim-frames", daemon=True),
         ]
         for th in threads:
