@@ -59,6 +59,7 @@ class Perceived:
     seg: StreamSegmentation | None = None
     scores: dict[str, float] = field(default_factory=dict)
     proposal: SamplingResult | None = None
+    segment: np.ndarray | None = None  # the next grasp's segment (front part of the proposal)
     proposal_grade: str | None = None
     seconds: float = 0.0
 
@@ -73,6 +74,7 @@ class Perceived:
             else {
                 "centre_camera": [float(x) for x in p.centre],
                 "pixels": int(p.mask.sum()),
+                "segment_pixels": None if self.segment is None else int(self.segment.sum()),
                 "grade": self.proposal_grade,
             },
             "proposal_rejections": None if sr is None else sr.rejections(),
@@ -91,7 +93,10 @@ def perceive(
     flow: str = "dis",
 ) -> Perceived:
     """Segment ``stream``, score the mask (votes >= 1) against the target frame's labels of
-    ``hose``, and propose the next grasp (the first grasp blacklisted, as exploration does)."""
+    ``hose``, and propose the next grasp as exploration does (the first grasp blacklisted, the
+    proposal cut to its front-most part in depth), graded against the labels."""
+    from cablesim.policies.explore import front_segment
+
     t0 = time.perf_counter()
     out = Perceived()
     out.seg = segment_stream(stream, method=method, flow=flow)
@@ -105,10 +110,11 @@ def perceive(
         centre_cam = (np.asarray(grasp_centre_world, float) - T[:3, 3]) @ T[:3, :3]
         sampler.add_grasp(centre_cam, start_segment, blacklist=True)
     out.proposal = sampler.propose(out.seg.votes, target.depth, target.intrinsics)
-    if out.proposal.proposal is not None and target.truth is not None:
-        out.proposal_grade = grade_proposal(
-            out.proposal.proposal.mask, target.truth.labels, hose, True
-        )
+    if out.proposal.proposal is not None:
+        # the front-most part in depth, as exploration aims it (votes bleed onto the board)
+        out.segment = front_segment(out.proposal.proposal.mask, target.depth)
+        if target.truth is not None:
+            out.proposal_grade = grade_proposal(out.segment, target.truth.labels, hose, True)
     out.seconds = time.perf_counter() - t0
     return out
 
@@ -188,11 +194,13 @@ def twin_episode(
     robot_options: dict[str, Any] | None = None,
     monitor_every: float = 0.0,
     camera_timeout: float = 5.0,
+    drain: float = 5.0,
 ) -> TwinEpisode:
     """One interaction on the franka-sim server at ``host`` with a twin of ``config``'s scene
     (module docstring).  The server must be running (:class:`FrankaSimServer`), its virtual
     gripper object as wide as the hose.  ``monitor_every`` > 0: ``say`` the twin's
-    statistics every so many seconds while it follows."""
+    statistics every so many seconds while it follows.  ``drain``: how long the clock waits
+    after an action for the frames the twin rendered of it (the twin may lag)."""
     from cablesim.episode.clock import StreamClock
     from cablesim.episode.runner import run_interaction
     from cablesim.policies.explore import grasp_reachability
@@ -229,7 +237,9 @@ def twin_episode(
         twin.follow()
         monitor = _Monitor(twin, say, every=monitor_every) if monitor_every else None
         camera = feed.camera(twin.T_world_camera, timeout_s=camera_timeout)
-        clock = StreamClock(robot, camera)
+        # frames are paired with the pose measured when they were taken (their twin time),
+        # not when they arrived: a loaded machine makes the twin lag
+        clock = StreamClock(robot, camera, frame_time=twin.frame_time, drain=drain)
         truth = TwinTruth(twin)
         t1 = time.perf_counter()
         result = run_interaction(

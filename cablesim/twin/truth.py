@@ -109,7 +109,7 @@ class TwinTruth:
     """Ground truth of a :class:`~cablesim.twin.world.TwinWorld` (module docstring)."""
 
     def __init__(
-        self, twin: Any, sync_timeout: float = 2.0, joint_tolerance: float = 0.003
+        self, twin: Any, sync_timeout: float = 10.0, joint_tolerance: float = 0.003
     ) -> None:
         self.twin = twin
         self.sync_timeout = float(sync_timeout)

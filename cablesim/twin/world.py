@@ -301,7 +301,7 @@ class TwinWorld:
         fps: float = 15.0,
         *,
         world: World | None = None,
-        max_lag: float = 5.0,
+        max_lag: float = 8.0,
         frame_lag: float = 0.3,
         max_frame_gap: float = 0.2,
         joint_period: float = 0.004,
@@ -563,6 +563,12 @@ class TwinWorld:
                 if abs(f.stamp - stamp) <= tolerance:
                     return f
             return None
+
+    def frame_time(self, image: Any) -> float:
+        """When a frame the twin rendered was taken, on ``time.monotonic()``'s time base (the
+        twin time it shows), from its timestamp (a camera's ``CameraImage.timestamp``): give it
+        to ``StreamClock(frame_time=...)``."""
+        return self._t0 + float(image.timestamp)
 
     def latest_frame(self) -> TwinFrame | None:
         with self._lock:
