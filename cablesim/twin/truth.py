@@ -79,6 +79,9 @@ class TwinTruthReport:
     gain_measured: dict[int, float] = field(default_factory=dict)  # vs the robot's gripper
     pairing_mm: list[float] = field(default_factory=list)  # paired pose vs the frame's TCP
     latency_ms: list[float] = field(default_factory=list)  # shown state -> frame arrived
+    grasp_hose_mm: float = float("nan")  # nearest hose point to the commanded grasp pose
+    grasp_tcp_mm: float = float("nan")  # twin TCP to the commanded grasp pose, when closed
+    grasp_opening_mm: float = float("nan")  # twin finger opening, when closed
     unlabelled_frames: int = 0  # frames no longer (or never) kept by the twin
     sync_timeouts: int = 0  # the twin did not catch up with the robot in time
 
@@ -100,6 +103,9 @@ class TwinTruthReport:
             "gain_vs_measured_gripper": self.gain_measured,
             "pairing_error_mm": stats(p),
             "frame_latency_ms": stats(lat),
+            "grasp_hose_mm": self.grasp_hose_mm,
+            "grasp_tcp_mm": self.grasp_tcp_mm,
+            "grasp_opening_mm": self.grasp_opening_mm,
             "unlabelled_frames": self.unlabelled_frames,
             "sync_timeouts": self.sync_timeouts,
         }
@@ -141,6 +147,9 @@ class TwinTruth:
     def grasp_probe(self, pose: Pose, hose: int | None) -> HosePointProbe | None:
         state = self._synced()
         ref, dist = HosePointRef.nearest(state.hose_vertices, pose.position, hose)
+        self.report.grasp_hose_mm = 1000.0 * dist
+        self.report.grasp_tcp_mm = 1000.0 * float(np.linalg.norm(state.tcp - pose.position))
+        self.report.grasp_opening_mm = 1000.0 * state.opening
         if dist > GRASP_MAX_DISTANCE:
             return None
 
