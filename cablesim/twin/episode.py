@@ -194,7 +194,7 @@ def twin_episode(
     robot_options: dict[str, Any] | None = None,
     monitor_every: float = 0.0,
     camera_timeout: float = 5.0,
-    drain: float = 5.0,
+    drain: float = 20.0,
 ) -> TwinEpisode:
     """One interaction on the franka-sim server at ``host`` with a twin of ``config``'s scene
     (module docstring).  The server must be running (:class:`FrankaSimServer`), its virtual
@@ -239,7 +239,9 @@ def twin_episode(
         camera = feed.camera(twin.T_world_camera, timeout_s=camera_timeout)
         # frames are paired with the pose measured when they were taken (their twin time),
         # not when they arrived: a loaded machine makes the twin lag
-        clock = StreamClock(robot, camera, frame_time=twin.frame_time, drain=drain)
+        clock = StreamClock(
+            robot, camera, frame_time=twin.frame_time, drain=drain, history=drain + 10.0
+        )
         truth = TwinTruth(twin)
         t1 = time.perf_counter()
         result = run_interaction(

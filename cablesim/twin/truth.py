@@ -115,7 +115,7 @@ class TwinTruth:
     """Ground truth of a :class:`~cablesim.twin.world.TwinWorld` (module docstring)."""
 
     def __init__(
-        self, twin: Any, sync_timeout: float = 10.0, joint_tolerance: float = 0.003
+        self, twin: Any, sync_timeout: float = 30.0, joint_tolerance: float = 0.003
     ) -> None:
         self.twin = twin
         self.sync_timeout = float(sync_timeout)
@@ -165,7 +165,13 @@ class TwinTruth:
         if hose is not None and grasp is not None:
             self.point, _ = HosePointRef.nearest(self._synced().hose_vertices, grasp.position, hose)
         self.log, self.measured = MotionLog(), MotionLog()
-        self.report = TwinTruthReport()
+        grasp = self.report
+        self.report = TwinTruthReport(
+            grasp_hose_mm=grasp.grasp_hose_mm,
+            grasp_tcp_mm=grasp.grasp_tcp_mm,
+            grasp_opening_mm=grasp.grasp_opening_mm,
+            sync_timeouts=grasp.sync_timeouts,
+        )
 
     def on_tick(self, action: int, tick: Tick) -> None:
         state = self.twin.state()

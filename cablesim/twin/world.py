@@ -28,7 +28,8 @@ positions interpolated at that time (extrapolated with the measured velocities f
 gripper actuator gets the opening measured then -- or 0, closing with its force limit on the
 hose, while the robot reports a grasp at an opening no wider than the hose (franka-sim's gripper
 stops at a virtual object; here the fingers must really squeeze the 15 mm hose for the friction
-grasp to hold).  So the twin re-enacts the robot's motion faithfully even when a loaded machine
+grasp to hold).  The gripper command moves at the hand's speed (``gripper_speed``: closing,
+opening; franky's defaults), since franka-sim's kinematic hand jumps.  So the twin re-enacts the robot's motion faithfully even when a loaded machine
 makes it fall behind the wall clock (the *lag*); it catches up as fast as its physics runs.
 Only beyond ``max_lag`` it skips ahead (counted; the arm then jumps).
 
@@ -301,7 +302,7 @@ class TwinWorld:
         fps: float = 15.0,
         *,
         world: World | None = None,
-        max_lag: float = 8.0,
+        max_lag: float = 20.0,
         frame_lag: float = 0.3,
         max_frame_gap: float = 0.2,
         joint_period: float = 0.004,
@@ -311,6 +312,7 @@ class TwinWorld:
         tessellation: tuple[int, int] | None = (12, 6),
         settle_time: float = 0.1,
         finger_rest_speed: float = 0.002,
+        gripper_speed: tuple[float, float] = (0.05, 0.1),
     ) -> None:
         self.cfg = config.validate()
         if not 0 < fps <= 60:
@@ -325,6 +327,7 @@ class TwinWorld:
         self.nice = int(nice)
         self.settle_time = float(settle_time)
         self.finger_rest_speed = float(finger_rest_speed)
+        self.gripper_speed = (float(gripper_speed[0]), float(gripper_speed[1]))
         if world is None:
             world = World.build(self.cfg.scene_config())
         world.reset()
@@ -381,7 +384,8 @@ class TwinWorld:
         self._q_target = self.q
         self._joint_at = -math.inf
         self._gripper_in_effect: tuple[float, bool, float] = (self.opening, False, -math.inf)
-        self._gripper_ctrl = float(d.ctrl[self._gripper_act])
+        self._gripper_ctrl = float(d.ctrl[self._gripper_act])  # the goal (m)
+        self._gripper_cmd = self._gripper_ctrl  # the actuator command, ramped to the goal
         self._finger_still_since: float | None = None
         self._fingers_settled = True
         self._state = self._make_state()
@@ -701,11 +705,16 @@ class TwinWorld:
             q, dq = self._joint_target(t)
             self._q_target = q
             d.ctrl[self._act] = q + KV_OVER_KP * dq
-            ctrl_g = self._gripper_target(t)
-            if ctrl_g != self._gripper_ctrl:
-                self._gripper_ctrl, self._finger_still_since = ctrl_g, None
+            goal = self._gripper_target(t)
+            if goal != self._gripper_ctrl:
+                self._gripper_ctrl, self._finger_still_since = goal, None
                 self._fingers_settled = False
-            d.ctrl[self._gripper_act] = ctrl_g
+            # the hand moves its fingers at its own speed (a command jumping to 0 would slam
+            # them through the thin hose)
+            speed = self.gripper_speed[0] if goal < self._gripper_cmd else self.gripper_speed[1]
+            step = speed * self._dt
+            self._gripper_cmd += float(np.clip(goal - self._gripper_cmd, -step, step))
+            d.ctrl[self._gripper_act] = self._gripper_cmd
             w.step(1)
             self.stats.steps += 1
             self._watch_fingers()
@@ -733,7 +742,7 @@ class TwinWorld:
     def _watch_fingers(self) -> None:
         speed = float(np.max(np.abs(self.world.data.qvel[self._finger_dofadr])))
         t = self.world.time
-        if speed > self.finger_rest_speed:
+        if speed > self.finger_rest_speed or self._gripper_cmd != self._gripper_ctrl:
             self._finger_still_since = None
         elif self._finger_still_since is None:
             self._finger_still_since = t
