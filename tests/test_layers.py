@@ -8,6 +8,8 @@ interpreter).
   MuJoCo as a geometry library, never ``cablesim.sim``);
 - ``episode`` (the interaction runner shared by the simulated and the real robot): nothing of
   ``cablesim.sim``, ``policies`` or ``envs``.
+
+The digital twin (``cablesim.twin``) counts as simulation: none of them imports it.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import sys
 import pytest
 
 ABOVE = ("cablesim.episode", "cablesim.policies", "cablesim.envs")
-SIM = ("cablesim.sim",)
+SIM = ("cablesim.sim", "cablesim.twin")  # the digital twin is simulation too
 RULES = {
     "cablesim.perception": SIM + ABOVE + ("mujoco",),
     "cablesim.formats": SIM + ABOVE + ("mujoco",),

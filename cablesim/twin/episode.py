@@ -213,7 +213,7 @@ def twin_episode(
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     twin = TwinWorld(cfg, fps=fps)
-    robot = feed = camera = None
+    robot = feed = camera = monitor = None
     try:
         timings["build"] = time.perf_counter() - t0
         say(f"twin of seed {cfg.seed} built in {timings['build']:.1f} s")
@@ -256,8 +256,6 @@ def twin_episode(
             park=twin.park,
         )
         timings["interaction"] = time.perf_counter() - t1
-        if monitor is not None:
-            monitor.stop()
         twin.pause()
         twin.check()
         perceived = Perceived()
@@ -287,6 +285,8 @@ def twin_episode(
             timings=timings,
         )
     finally:
+        if monitor is not None:
+            monitor.stop()
         if camera is not None:
             camera.close()
         twin.close()
