@@ -120,7 +120,8 @@ def main() -> int:
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",
-        "Skew: |pose sample time - frame arrival| (StreamClock).  Pairing error: distance "
+        "Skew: |pose sample time - the time the frame was taken| (StreamClock with "
+        "frame_time=twin.frame_time: the twin time the frame shows).  Pairing error: distance "
         "between the gripper position paired with a frame and the twin TCP the frame shows.  "
         "Lag: wall time minus the twin time a frame shows, when rendered.  Tracking: twin TCP "
         "vs the replayed robot joints' TCP.",
