@@ -23,6 +23,7 @@ SUBCOMMANDS: dict[str, str] = {
     "calibrate": "eye-to-hand camera calibration with a ChArUco board in the gripper",
     "view": "write a rerun recording (.rrd) of a recording or run folder, or open one",
     "segment": "run perception on a recorded interaction (any layout): votes, masks, scores",
+    "twin": "the real-robot path with no hardware: franka-sim + a digital twin + RealSense",
 }
 
 
