@@ -156,7 +156,7 @@ class RealSession(Session):
         return tuple(self.cfg.park_qpos)
 
     def close(self) -> None:
-        self.camera.close()
+        super().close()
         close = getattr(getattr(self.robot, "robot", None), "close", None)
         if callable(close):
             close()

@@ -97,6 +97,10 @@ class Session:
         self.robot.stop()
 
     def close(self) -> None:
+        masker = getattr(self, "_arm_masker", None)
+        if masker is not None:
+            masker.close()  # frees its OpenGL context on its own thread
+            self._arm_masker, self._arm_masker_key = None, None
         self.camera.close()
 
     def __enter__(self) -> Session:
