@@ -4,6 +4,8 @@ residual actions) and compare it with a random policy on held-out seeds.
     pip install -e '.[rl]'          # stable-baselines3 (and the CPU torch it runs on)
     python -m cablesim.envs.train_ppo --steps 256 --n-steps 32 --out runs/ppo
 
+(``tests/envs/test_box.py`` runs it with ``--steps 32 --n-steps 16``.)
+
 Every environment step is a full simulated interaction (about 1.5-2 s of CPU in the fast
 configuration when the hand reaches the hose, well under 0.1 s when the action is refused as
 unreachable), so a few hundred steps take minutes.  What it does:
@@ -201,7 +203,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--budget", type=int, default=1, help="interactions per episode")
     ap.add_argument("--eval-seeds", default="1000,1001,1002,1003")
     ap.add_argument("--out", type=Path, default=None, help="write ppo.json here")
+    ap.add_argument("--torch-threads", type=int, default=None, help="torch.set_num_threads")
     args = ap.parse_args(argv)
+    if args.torch_threads is not None:
+        import torch
+
+        torch.set_num_threads(args.torch_threads)
     seeds = tuple(int(s) for s in args.eval_seeds.split(",") if s.strip())
     run = train_and_evaluate(
         steps=args.steps,

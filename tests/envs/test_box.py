@@ -158,12 +158,23 @@ def test_fast_config() -> None:
 def test_registered_box_env_passes_the_checkers() -> None:
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    env = gym.make(BOX_ENV_ID, config=TINY, aimed=True)
+    aimed = gym.make(BOX_ENV_ID, config=TINY, aimed=True, along=2.0)
+    assert isinstance(aimed.unwrapped, HoseExploreEnv)
+    layer, layers = aimed, []
+    while layer is not aimed.unwrapped:
+        layers.append(layer)
+        layer = layer.env
+    residual = [w for w in layers if isinstance(w, AimedBoxAction)]
+    assert len(residual) == 1 and residual[0].along == 2.0
+    assert isinstance(layers[layers.index(residual[0]) - 1], ImageObservation)
+    # the checkers step with uniform random actions: on the plain Box action those are
+    # mostly refused at once (unreachable), so this stays cheap
+    env = gym.make(BOX_ENV_ID, config=fast_config())  # budget 2: check_env wants > 1 step
     try:
-        assert isinstance(env.unwrapped, HoseExploreEnv)
         assert env.action_space == gym.spaces.Box(-1.0, 1.0, (4,), np.float32)
         assert set(env.observation_space) == {"image", "gripper"}
-        check_env(env.env)  # gymnasium's checker, on the wrappers (not gym.make's checker)
+        assert env.observation_space["image"].shape == (120, 160, 6)
+        check_env(env.env.env)  # gymnasium's checker on the wrappers, not gym.make's own ones
         sb3_check_env(env, warn=False)
     finally:
         env.close()
@@ -188,27 +199,31 @@ def test_aimed_zero_action_reaches_the_hose() -> None:
 
 # ---------------------------------------------------------------------- Stable-Baselines3
 @pytest.mark.slow
-def test_sb3_ppo_learns_to_grasp_on_the_box_env() -> None:
-    """PPO (MultiInputPolicy: a CNN on the image) trains on the shipped Box variant (fast
-    configuration, aimed residual actions, one interaction per episode) for 32 steps (two
-    updates of 16) and then beats a random policy on four held-out seeds, having moved its
-    primitive switch towards grasping (pushes earn nothing in this configuration)."""
+def test_sb3_ppo_learns_to_grasp_on_the_box_env(tmp_path) -> None:
+    """The shipped example (``python -m cablesim.envs.train_ppo``): PPO (MultiInputPolicy, a
+    CNN on the image) trains on the Box variant (fast configuration, aimed residual actions,
+    one interaction per episode) for 32 steps (two updates of 16) and then beats a random
+    policy on four held-out seeds, having moved its primitive switch towards grasping (pushes
+    earn nothing in this configuration)."""
+    import json
+
     import torch
 
-    from cablesim.envs.train_ppo import train_and_evaluate
+    from cablesim.envs.train_ppo import main
 
     threads = torch.get_num_threads()
-    torch.set_num_threads(1)
     try:
-        run = train_and_evaluate(steps=32, n_steps=16, seed=0, eval_seeds=(1000, 1001, 1002, 1003))
+        argv = ["--steps", "32", "--n-steps", "16", "--seed", "0", "--torch-threads", "1"]
+        assert main([*argv, "--eval-seeds", "1000,1001,1002,1003", "--out", str(tmp_path)]) == 0
     finally:
         torch.set_num_threads(threads)
-    print(run.summary())
-    assert run.steps == 32 and len(run.train_episode_returns) > 0
-    assert np.mean(run.switch_after) < np.mean(run.switch_before) - 0.2
-    assert all(s < 0 for s in run.switch_after)  # the deterministic policy grasps
-    assert run.trained_mean > run.random_mean
-    assert run.trained_mean > 0.3
+    run = json.loads((tmp_path / "ppo.json").read_text())
+    assert run["steps"] == 32 and len(run["train_episode_returns"]) > 0
+    before, after = run["switch_before"], run["switch_after"]
+    assert np.mean(after) < np.mean(before) - 0.2
+    assert all(s < 0 for s in after)  # the deterministic policy grasps
+    assert run["trained_mean"] > run["random_mean"]
+    assert run["trained_mean"] > 0.3
 
 
 @pytest.mark.slow
