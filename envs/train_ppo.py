@@ -137,6 +137,7 @@ def train_and_evaluate(
             n_epochs=n_epochs,
             learning_rate=learning_rate,
             seed=seed,
+            stats_window_size=max(100, steps),  # keep every training episode's return
             device="cpu",
             verbose=0,
         )
