@@ -16,7 +16,7 @@ NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 EXPECTED = {
     "01_prototyping.ipynb": ("correlation", "interaction ok"),
     "02_sequences.ipynb": ("layouts: cablesim-recording / mcor", "published", "[segment] union"),
-    "03_rl.ipynb": ("aimed action", "Box(-1.0, 1.0, (4,)", "trained"),
+    "03_rl.ipynb": ("aimed action", "Box(-1.0, 1.0, (4,)", "trained 8 steps"),
 }
 
 
