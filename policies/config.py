@@ -16,7 +16,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from cablesim.config import from_dict, pretty, to_dict
+from cablesim.config import check_fields, check_int, from_dict, pretty, to_dict
 from cablesim.errors import ConfigError
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.grasp_sampler import GraspSamplerParams
@@ -97,6 +97,7 @@ class ExploreConfig:
         )
 
     def validate(self) -> ExploreConfig:
+        check_fields(self)
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
         if self.strategy not in STRATEGIES:
@@ -113,6 +114,11 @@ class ExploreConfig:
             raise ConfigError("max_attempts", f"must be >= grasps ({self.grasps})")
         if self.merged_votes < 1:
             raise ConfigError("merged_votes", "must be >= 1")
+        check_int("max_attempts", self.max_attempts, 1, 100)
+        check_int("random_tries", self.random_tries, 1)
+        for name in ("width", "height"):
+            if getattr(self, name) is not None:
+                check_int(name, getattr(self, name), 16)
         self.perturb.validate()
         self.episode_config().validate()
         return self

@@ -16,9 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
-import cv2
 import numpy as np
 
 from cablesim.commands._args import (
@@ -26,16 +24,21 @@ from cablesim.commands._args import (
     add_scene_arguments,
     apply_interaction_arguments,
     apply_scene_arguments,
+    check_settle_cache,
+    output_path,
+    prepare_output_dir,
+    write_image,
 )
 from cablesim.errors import RecordingError
 from cablesim.perception.frames import LABEL_ROBOT, Stream
+from cablesim.recording import is_recording
 from cablesim.sim.session import EpisodeConfig
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p, "episode and scene seed")
     p.add_argument("--hose", type=int, default=None, help="hose to grasp (default: drawn)")
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=output_path, required=True, help="output directory")
     add_interaction_arguments(p)
     p.add_argument("--push", action="store_true", help="push (poke) instead of grasping")
     p.add_argument("--overwrite", action="store_true", help="replace an existing recording")
@@ -81,11 +84,16 @@ def run(args: argparse.Namespace) -> int:
     from cablesim.sim.session import simulate_episode
 
     cfg = config_from_args(args)
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_output_dir(args.out)
     rec = out / "recording"
-    if rec.exists() and any(rec.iterdir()) and not args.overwrite:
-        raise RecordingError(f"{rec} exists and is not empty (use --overwrite)")
+    if rec.exists() and not rec.is_dir():
+        raise RecordingError(f"{rec} exists and is not a directory")
+    if rec.is_dir() and any(rec.iterdir()):
+        if not args.overwrite:
+            raise RecordingError(f"{rec} exists and is not empty (use --overwrite)")
+        if not is_recording(rec):
+            raise RecordingError(f"{rec} is not a cablesim recording; refusing to overwrite it")
+    check_settle_cache(cfg.scene)
     if cfg.progress:
         print(f"[episode] config:\n{cfg}")
     ep = simulate_episode(cfg, record_to=out / "recording", overwrite=args.overwrite)
@@ -100,14 +108,14 @@ def run(args: argparse.Namespace) -> int:
         if res.success and res.stream is not None:
             start_img = ep.start_image.rgb
             sheet = contact_sheet(start_img, ep.segment.mask, res.stream)
-            cv2.imwrite(str(out / "contact_sheet.png"), _bgr(sheet))
-            cv2.imwrite(str(out / "start.png"), _bgr(start_img))
-            cv2.imwrite(str(out / "target.png"), _bgr(res.stream.target.rgb))
+            write_image(out / "contact_sheet.png", _bgr(sheet))
+            write_image(out / "start.png", _bgr(start_img))
+            write_image(out / "target.png", _bgr(res.stream.target.rgb))
             t = res.stream.target.truth
             if t is not None:
                 lab = np.where(t.labels >= 0, 60 + 40 * t.labels, 0)
                 lab[t.labels == LABEL_ROBOT] = 255
-                cv2.imwrite(str(out / "target_labels.png"), lab.astype(np.uint8))
+                write_image(out / "target_labels.png", lab.astype(np.uint8))
             kept = len(res.stream) - 1
             summary["frames_kept"] = kept
             summary["gain"] = {a.label: a.gain for a in res.actions}

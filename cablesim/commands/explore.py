@@ -19,6 +19,8 @@ from cablesim.commands._args import (
     add_scene_arguments,
     apply_interaction_arguments,
     apply_scene_arguments,
+    check_settle_cache,
+    prepare_output_dir,
 )
 from cablesim.policies.config import FLOWS, MERGES, STRATEGIES, ExploreConfig
 from cablesim.sim.perturb import PerturbConfig
@@ -73,10 +75,14 @@ def run(args: argparse.Namespace) -> int:
     flow_kwargs = None
     if cfg.flow == "raft":
         from cablesim.errors import InputError
+        from cablesim.perception.raft import load_raft
 
         if args.raft_checkpoint is None:
             raise InputError("--flow raft needs --raft-checkpoint (no weights are downloaded)")
+        load_raft(args.raft_checkpoint)  # file, torch and weights checked before the scene
         flow_kwargs = {"checkpoint": args.raft_checkpoint}
+    args.out = prepare_output_dir(args.out)
+    check_settle_cache(cfg.episode.scene)
     if cfg.progress:
         print(f"[explore] config:\n{cfg}", flush=True)
     res = explore(cfg, out=args.out, flow_kwargs=flow_kwargs)

@@ -19,7 +19,14 @@ import cv2
 import mujoco
 import numpy as np
 
-from cablesim.commands._args import add_scene_arguments, apply_scene_arguments
+from cablesim.commands._args import (
+    add_scene_arguments,
+    apply_scene_arguments,
+    check_settle_cache,
+    output_path,
+    prepare_output_dir,
+    write_image,
+)
 from cablesim.config import to_dict
 from cablesim.errors import InputError
 from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
@@ -50,7 +57,7 @@ BACKGROUND_COLOUR = np.array([0, 0, 0], np.uint8)
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=output_path, required=True, help="output directory")
     p.add_argument("--background", choices=BACKGROUNDS, default=None, help="board background")
     p.add_argument("--hose", type=int, default=0, help="which hose to pull (default 0)")
     p.add_argument("--no-robot", action="store_true", help="leave the arm out of the scene")
@@ -141,8 +148,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = scene_config(args)
     if not 0 <= args.hose < cfg.hoses.count:
         raise InputError(f"--hose {args.hose} is not one of the {cfg.hoses.count} hoses")
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_output_dir(args.out)
+    check_settle_cache(cfg)
     t0 = time.perf_counter()
     print(
         f"[scene] building seed {cfg.seed}: {cfg.hoses.count} hoses, "
@@ -167,13 +174,13 @@ def run(args: argparse.Namespace) -> int:
         )
         pulled = pull_hose(world, args.hose, PULL_DISTANCE, PULL_TIME)
         after = cam.snapshot()
-        cv2.imwrite(str(out / "rgb_moved.png"), cv2.cvtColor(after.rgb, cv2.COLOR_RGB2BGR))
+        write_image(out / "rgb_moved.png", cv2.cvtColor(after.rgb, cv2.COLOR_RGB2BGR))
         np.save(out / "labels_moved.npy", after.labels)
         print("[scene] ground-truth flow", flush=True)
         flow, valid, _ = gt_flow(before, after)
         np.save(out / "flow.npy", flow)
         np.save(out / "flow_valid.npy", valid)
-        cv2.imwrite(str(out / "flow.png"), colour_flow(flow, valid))
+        write_image(out / "flow.png", colour_flow(flow, valid))
         mag = np.linalg.norm(flow[valid & (before.labels == args.hose)], axis=-1)
         meta = {
             "seed": cfg.seed,
@@ -204,8 +211,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_frame(out: Path, suffix: str, snap) -> None:
-    cv2.imwrite(str(out / f"rgb{suffix}.png"), cv2.cvtColor(snap.rgb, cv2.COLOR_RGB2BGR))
-    cv2.imwrite(str(out / f"depth{suffix}.png"), colour_depth(snap.image.depth))
+    write_image(out / f"rgb{suffix}.png", cv2.cvtColor(snap.rgb, cv2.COLOR_RGB2BGR))
+    write_image(out / f"depth{suffix}.png", colour_depth(snap.image.depth))
     np.save(out / f"depth{suffix}.npy", snap.image.depth)
-    cv2.imwrite(str(out / f"labels{suffix}.png"), colour_labels(snap.labels))
+    write_image(out / f"labels{suffix}.png", colour_labels(snap.labels))
     np.save(out / f"labels{suffix}.npy", snap.labels)

@@ -35,7 +35,13 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_depth, as_flow, check_positive, valid_depth
+from cablesim.perception._checks import (
+    as_depth,
+    as_flow,
+    check_params,
+    check_positive,
+    valid_depth,
+)
 
 DepthMode = Literal["gripper", "pixel"]
 
@@ -51,6 +57,7 @@ class CorrelationParams:
     min_samples: int = 3  # used samples needed at a pixel for a fit
 
     def __post_init__(self) -> None:
+        check_params(self)
         if self.tau_n < 0:
             raise InputError(f"tau_n must be >= 0, got {self.tau_n}")
         if self.depth_mode not in ("gripper", "pixel"):
@@ -69,6 +76,7 @@ class AblationParams:
     min_samples: int = 3
 
     def __post_init__(self) -> None:
+        check_params(self)
         if self.tau_n < 0:
             raise InputError(f"tau_n must be >= 0, got {self.tau_n}")
         if self.std_min < 0:

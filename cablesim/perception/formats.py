@@ -64,6 +64,13 @@ def labels_to_instances(labels: np.ndarray) -> np.ndarray:
 def encode_flow_png(flow: np.ndarray, instances: np.ndarray | None = None) -> np.ndarray:
     """HxWx3 uint16 array in OpenCV (BGR) order ready for ``cv2.imwrite``."""
     flow = as_flow(flow)
+    lo, hi = -FLOW_OFFSET / FLOW_SCALE, (65535 - FLOW_OFFSET) / FLOW_SCALE
+    finite = flow[np.isfinite(flow)]
+    if finite.size and (finite.min() < lo or finite.max() > hi):
+        raise InputError(
+            f"flow of {finite.min():.6g}..{finite.max():.6g} px does not fit a flow PNG "
+            f"(range {lo:g}..{hi:.4g} px); it would be clipped"
+        )
     h, w = flow.shape[:2]
     out = np.zeros((h, w, 3), np.uint16)
     enc = np.clip(np.rint(np.nan_to_num(flow) * FLOW_SCALE + FLOW_OFFSET), 0, 65535)

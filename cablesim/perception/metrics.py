@@ -21,8 +21,8 @@ BETAS: tuple[float, ...] = (1.0, 0.5, 0.4, 0.3)
 
 def confusion(pred: np.ndarray, truth: np.ndarray) -> tuple[int, int, int]:
     """(true positives, false positives, false negatives) of two HxW masks."""
-    truth = as_mask(truth, name="truth")
-    pred = as_mask(pred, truth.shape, name="prediction")
+    truth = as_mask(truth, name="truth", binary=True)
+    pred = as_mask(pred, truth.shape, name="prediction", binary=True)
     tp = int(np.count_nonzero(pred & truth))
     fp = int(np.count_nonzero(pred)) - tp
     fn = int(np.count_nonzero(truth)) - tp
@@ -34,7 +34,7 @@ def _div(a: float, b: float) -> float:
 
 
 def f_beta(precision: float, recall: float, beta: float) -> float:
-    if beta <= 0:
+    if not 0 < beta < float("inf"):
         raise InputError(f"beta must be positive, got {beta}")
     b2 = beta * beta
     return _div((1 + b2) * precision * recall, b2 * precision + recall)

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from cablesim.camera.base import CameraImage
-from cablesim.config import from_dict, pretty, to_dict
+from cablesim.config import check_fields, from_dict, pretty, to_dict
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.runner import InteractionResult, run_interaction
 from cablesim.errors import ConfigError
@@ -48,6 +48,7 @@ class EpisodeConfig:
     progress: bool = False  # print progress lines
 
     def validate(self) -> EpisodeConfig:
+        check_fields(self)
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
         if self.hose is not None and (
