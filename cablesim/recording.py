@@ -160,27 +160,14 @@ class RecordingWriter:
     ):
         self.path = Path(path)  # where the recording is (after close, when overwriting)
         self.dir = self.path  # where its files are written now
-        self.replaces = False  # writing beside an old recording, swapped in on close
-        if str(path) == "":
-            raise RecordingError("the recording path is empty")
-        if self.path.exists() and not self.path.is_dir():
-            raise RecordingError(f"{self.path} exists and is not a directory")
+        # writing beside an old recording, swapped in on close
+        self.replaces = self.check_target(path, overwrite)
         try:
-            if self.path.is_dir() and any(self.path.iterdir()):
-                if not overwrite:
-                    raise RecordingError(f"{self.path} exists and is not empty (use overwrite)")
-                if not is_recording(self.path):
-                    raise RecordingError(
-                        f"{self.path} is not a cablesim recording (no readable meta.json); "
-                        "refusing to overwrite it"
-                    )
-                self.replaces = True
+            if self.replaces:
                 self.dir = _unique_name(self.path, "new")
             (self.dir / "frames").mkdir(parents=True, exist_ok=True)
             (self.dir / "flow").mkdir(exist_ok=True)
             self._index = open(self.dir / "index.jsonl", "a", encoding="utf-8")  # noqa: SIM115
-        except RecordingError:  # an OSError too
-            raise
         except OSError as e:
             raise RecordingError(f"{self.path}: cannot write a recording there ({e})") from e
         self.meta = dict(meta or {})
@@ -188,6 +175,31 @@ class RecordingWriter:
         self.frames = 0
         self.closed = False
         self._write_meta(complete=False)
+
+    @staticmethod
+    def check_target(
+        path: str | os.PathLike[str], overwrite: bool = False, flag: str = "overwrite"
+    ) -> bool:
+        """``RecordingError`` unless a recording can be written at ``path`` (checked before
+        any expensive step); True when it would replace an existing recording."""
+        if str(path).strip() == "":
+            raise RecordingError("the recording path is empty")
+        p = Path(path)
+        if p.exists() and not p.is_dir():
+            raise RecordingError(f"{p} exists and is not a directory")
+        try:
+            occupied = p.is_dir() and any(p.iterdir())
+        except OSError as e:
+            raise RecordingError(f"{p}: cannot be read ({e.strerror or e})") from e
+        if not occupied:
+            return False
+        if not overwrite:
+            raise RecordingError(f"{p} exists and is not empty (use {flag})")
+        if not is_recording(p):
+            raise RecordingError(
+                f"{p} is not a cablesim recording (no readable meta.json); refusing to overwrite it"
+            )
+        return True
 
     def _write_meta(self, complete: bool) -> None:
         doc = {

@@ -29,9 +29,8 @@ from cablesim.commands._args import (
     prepare_output_dir,
     write_image,
 )
-from cablesim.errors import RecordingError
 from cablesim.perception.frames import LABEL_ROBOT, Stream
-from cablesim.recording import is_recording
+from cablesim.recording import RecordingWriter
 from cablesim.sim.session import EpisodeConfig
 
 
@@ -85,14 +84,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = config_from_args(args)
     out = prepare_output_dir(args.out)
-    rec = out / "recording"
-    if rec.exists() and not rec.is_dir():
-        raise RecordingError(f"{rec} exists and is not a directory")
-    if rec.is_dir() and any(rec.iterdir()):
-        if not args.overwrite:
-            raise RecordingError(f"{rec} exists and is not empty (use --overwrite)")
-        if not is_recording(rec):
-            raise RecordingError(f"{rec} is not a cablesim recording; refusing to overwrite it")
+    RecordingWriter.check_target(out / "recording", args.overwrite, "--overwrite")
     check_settle_cache(cfg.scene)
     if cfg.progress:
         print(f"[episode] config:\n{cfg}")

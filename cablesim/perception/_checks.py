@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from typing import Any
 
 import numpy as np
@@ -92,10 +94,28 @@ def valid_depth(depth: np.ndarray) -> np.ndarray:
     return np.isfinite(depth) & (depth > 0)
 
 
+def is_real(value: object) -> bool:
+    """A real number (Python or NumPy), not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+
+
+def as_real(value: object, name: str, finite: bool = True) -> float:
+    """``value`` as a float, or ``InputError`` unless it is a (finite) real number."""
+    if not is_real(value):
+        raise InputError(f"{name} must be a number, got {value!r}")
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except OverflowError:  # an integer beyond the float range
+        v = math.copysign(math.inf, value)  # type: ignore[arg-type]
+    if finite and not math.isfinite(v):
+        raise InputError(f"{name} must be finite, got {value!r}")
+    return v
+
+
 def check_positive(value: float, name: str) -> float:
-    if isinstance(value, bool | np.bool_) or not isinstance(value, int | float | np.number):
+    if not is_real(value):
         raise InputError(f"{name} must be a positive number, got {value!r}")
-    v = float(value)
+    v = as_real(value, name, finite=False)
     if not np.isfinite(v) or v <= 0:
         raise InputError(f"{name} must be positive and finite, got {value!r}")
     return v

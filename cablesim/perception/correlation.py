@@ -38,6 +38,7 @@ from cablesim.errors import InputError
 from cablesim.perception._checks import (
     as_depth,
     as_flow,
+    as_real,
     check_params,
     check_positive,
     valid_depth,
@@ -127,7 +128,10 @@ class CorrelationAccumulator:
         dtype: type = np.float32,
     ) -> None:
         self.params = params if params is not None else CorrelationParams()
-        h, w = int(shape[0]), int(shape[1])
+        try:
+            h, w = int(shape[0]), int(shape[1])
+        except (TypeError, ValueError, IndexError) as e:
+            raise InputError(f"shape must be (height, width), got {shape!r}") from e
         if h <= 0 or w <= 0:
             raise InputError(f"shape must be positive, got {shape}")
         self.shape = (h, w)
@@ -150,9 +154,9 @@ class CorrelationAccumulator:
 
     def update(self, flow: np.ndarray, d_g: float, z: float | None = None) -> None:
         flow = as_flow(flow, self.shape)
-        d_g = float(d_g)
-        if not np.isfinite(d_g):
-            raise InputError(f"d_g must be finite, got {d_g}")
+        d_g = as_real(d_g, "d_g")
+        if z is not None:
+            z = as_real(z, "gripper depth z", finite=False)
         if self.params.depth_mode == "gripper":
             if z is None or not np.isfinite(z) or z <= 0:
                 raise InputError(f"depth_mode 'gripper' needs a positive gripper depth, got {z!r}")

@@ -14,6 +14,8 @@ Conventions
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -25,6 +27,13 @@ from cablesim.errors import InputError
 TARGET_ACTION = -1
 LABEL_BACKGROUND = -1
 LABEL_ROBOT = -2
+
+
+def _finite(v: numbers.Real) -> bool:
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:  # an integer beyond the float range
+        return False
 
 
 @dataclass(frozen=True)
@@ -41,9 +50,9 @@ class Intrinsics:
     def __post_init__(self) -> None:
         for name in ("fx", "fy", "cx", "cy"):
             v = getattr(self, name)
-            if isinstance(v, bool | np.bool_) or not isinstance(v, int | float | np.number):
+            if isinstance(v, bool | np.bool_) or not isinstance(v, numbers.Real):
                 raise InputError(f"intrinsics.{name} must be a number, got {v!r}")
-            if not np.isfinite(v):
+            if not _finite(v):
                 raise InputError(f"intrinsics.{name} must be finite, got {v!r}")
         for name in ("fx", "fy"):
             v = getattr(self, name)
@@ -110,8 +119,10 @@ class Intrinsics:
         values: dict[str, Any] = {}
         for k in ("fx", "fy", "cx", "cy", "width", "height"):
             v = d[k]
-            if isinstance(v, bool) or not isinstance(v, int | float | np.number):
+            if isinstance(v, bool | np.bool_) or not isinstance(v, numbers.Real):
                 raise InputError(f"intrinsics.{k} must be a number, got {v!r}")
+            if not _finite(v):
+                raise InputError(f"intrinsics.{k} must be finite, got {v!r}")
             if k in ("width", "height"):
                 if not float(v).is_integer():
                     raise InputError(f"intrinsics.{k} must be a whole number of pixels, got {v!r}")
@@ -164,9 +175,9 @@ class Frame:
             if isinstance(v, bool | np.bool_) or not isinstance(v, int | np.integer):
                 raise InputError(f"frame {name} must be an integer, got {v!r}")
         t = self.timestamp
-        if isinstance(t, bool | np.bool_) or not isinstance(t, int | float | np.number):
+        if isinstance(t, bool | np.bool_) or not isinstance(t, numbers.Real):
             raise InputError(f"frame timestamp must be a number, got {t!r}")
-        if not np.isfinite(t):
+        if not _finite(t):
             raise InputError(f"frame timestamp must be finite, got {t!r}")
         try:
             g = np.asarray(self.gripper, dtype=np.float64)
@@ -181,7 +192,7 @@ class Frame:
                 raise InputError(f"gripper_quat must be 4 numbers (wxyz), got {q.dtype} {q.shape}")
         if self.gripper_opening is not None:
             v = self.gripper_opening
-            if isinstance(v, bool) or not isinstance(v, int | float | np.number):
+            if isinstance(v, bool | np.bool_) or not isinstance(v, numbers.Real):
                 raise InputError(f"gripper_opening must be a number, got {v!r}")
         if self.truth is not None:
             check_truth(self.truth, self.rgb.shape[:2])

@@ -35,6 +35,9 @@ from cablesim.perception.skeleton import split_skeleton, thinning
 
 Reachability = Callable[[np.ndarray, np.ndarray], tuple[bool, str]]
 
+#: Distinct vote levels a vote image may have (votes count actions: a few per grasp).
+MAX_VOTE_LEVELS = 1024
+
 
 @dataclass(frozen=True)
 class GraspSamplerParams:
@@ -66,12 +69,20 @@ class GraspSamplerParams:
         ):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("segment_length_px", "area_min", "area_max", "min_depth_points", "min_votes"):
+            if getattr(self, name) >= 2**31:
+                raise InputError(f"{name} must be < 2**31, got {getattr(self, name)}")
         if self.min_depth_points < 1:
             raise InputError(f"min_depth_points must be >= 1, got {self.min_depth_points}")
         if self.area_min > self.area_max:
             raise InputError(f"area_min {self.area_min} > area_max {self.area_max}")
         if not 0 < self.g_min <= self.g_max or self.g_delta <= 0:
             raise InputError("need 0 < g_min <= g_max and g_delta > 0")
+        if (self.g_max - self.g_min) / self.g_delta > 1000:
+            raise InputError(
+                f"g_delta {self.g_delta} makes more than 1000 frontiers from g_max {self.g_max} "
+                f"to g_min {self.g_min}"
+            )
         if self.segment_length_px < 2:
             raise InputError("segment_length_px must be >= 2")
         if self.min_votes < 1:
@@ -79,8 +90,10 @@ class GraspSamplerParams:
 
     def frontiers(self) -> list[float]:
         gs, g = [], self.g_max
-        while g >= self.g_min - 1e-9:
+        while g >= self.g_min - 1e-9 and len(gs) <= 1000:
             gs.append(round(g, 9))
+            if g - self.g_delta >= g:  # below float resolution at this magnitude
+                break
             g -= self.g_delta
         return gs
 
@@ -256,6 +269,11 @@ class GraspSampler:
         result = SamplingResult(None)
         unreachable: list[tuple[np.ndarray, str]] = []
         levels = np.unique(votes[votes >= p.min_votes])[::-1]
+        if len(levels) > MAX_VOTE_LEVELS:
+            raise InputError(
+                f"votes have {len(levels)} distinct levels >= {p.min_votes} (at most "
+                f"{MAX_VOTE_LEVELS}): a vote image counts the actions supporting each pixel"
+            )
         for level in (int(v) for v in levels):
             level_mask = votes >= level
             cands = []

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_flow, as_mask
+from cablesim.perception._checks import as_flow, as_mask, is_real
 from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
 
 BETAS: tuple[float, ...] = (1.0, 0.5, 0.4, 0.3)
@@ -34,7 +34,7 @@ def _div(a: float, b: float) -> float:
 
 
 def f_beta(precision: float, recall: float, beta: float) -> float:
-    if not 0 < beta < float("inf"):
+    if not is_real(beta) or not 0 < beta < float("inf"):
         raise InputError(f"beta must be positive, got {beta}")
     b2 = beta * beta
     return _div((1 + b2) * precision * recall, b2 * precision + recall)

@@ -31,9 +31,31 @@ BACKGROUNDS = ("wood", "bushes", "cables", "solid")
 # x in [TABLE_X[0], TABLE_X[1]], |y| <= TABLE_HALF_WIDTH; see cablesim.sim.world).
 TABLE_X = (-0.6, 0.9)
 TABLE_HALF_WIDTH = 0.85
+BOARD_X = (-0.4, 0.9)  # the board's front face stays over the table
 HOSE_LENGTH = (0.1, 3.0)  # metres: a hose longer than 3 m does not fit on the table
 MAX_HOSE_VERTICES = 300  # per hose (length / segment_length)
 WORLD_LIMIT = 10.0  # metres: every configured position lies within +-10 m of the origin
+MIN_HOSE_VERTICES = 8
+
+
+def hose_vertex_count(length: float, segment_length: float) -> int:
+    """Vertices of a hose of ``length`` with edges of about ``segment_length`` (at least 8)."""
+    return max(MIN_HOSE_VERTICES, int(round(length / segment_length)) + 1)
+
+
+def min_vertex_spacing(lengths: tuple[float, float], segment_length: float) -> float:
+    """The smallest edge length of any hose with a length in ``lengths``: at the shortest
+    length, or just above a length where the vertex count steps up."""
+    lo, hi = float(lengths[0]), float(lengths[1])
+    points = [lo, hi]
+    k = max(0, int(lo / segment_length) - 1)
+    while (k + 0.5) * segment_length <= hi and len(points) < 2 * MAX_HOSE_VERTICES:
+        for x in ((k + 0.5) * segment_length * (1 + e) for e in (-1e-12, 0.0, 1e-12)):
+            if lo <= x <= hi:
+                points.append(x)
+        k += 1
+    return min(x / (hose_vertex_count(x, segment_length) - 1) for x in points)
+
 
 # Default connector layout on the board: (y, z) of each male connector, two rows of five.
 DEFAULT_CONNECTORS: tuple[tuple[float, float], ...] = tuple(
@@ -63,7 +85,7 @@ class BoardConfig:
             )
         for name in ("width", "height", "thickness", "connector_length"):
             check_positive(f"board.{name}", getattr(self, name))
-        check_number("board.x", self.x, TABLE_X[0] + 0.2, TABLE_X[1])
+        check_number("board.x", self.x, *BOARD_X)
         check_number("board.width", self.width, hi=2 * TABLE_HALF_WIDTH)
         check_number("board.height", self.height, hi=3.0)
         check_number("board.thickness", self.thickness, hi=0.2)
@@ -126,6 +148,14 @@ class HoseConfig:
                 "hoses.segment_length",
                 f"{self.segment_length} m makes {n:.0f} vertices of a {self.length[1]} m hose "
                 f"(at most {MAX_HOSE_VERTICES})",
+            )
+        spacing = min_vertex_spacing(self.length, self.segment_length)
+        if spacing < 2 * self.radius * (1 + 1e-6):  # MuJoCo: spacing > diameter
+            raise ConfigError(
+                "hoses.length",
+                f"a hose of {self.length[0]} to {self.length[1]} m gets vertices {spacing:.4g} m "
+                f"apart, not more than its diameter {2 * self.radius:.4g} m (make the hoses longer, "
+                "the segments longer or the radius smaller)",
             )
         check_range("hoses.young", self.young, lo=1e-9, hi=1e12)
         if not 0 <= self.poisson < 0.5:

@@ -209,6 +209,8 @@ def simulate_episode(
     as they come (see :mod:`cablesim.recording`)."""
     from cablesim.recording import RecordingWriter
 
+    if record_to is not None:  # before the scene is built
+        RecordingWriter.check_target(record_to, overwrite)
     say: Say = Progress("episode") if config.progress else quiet
     session = SimSession.build(config)
     cfg = session.cfg
