@@ -69,6 +69,8 @@ class GraspSamplerParams:
         ):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.gather_radius_px > 1e6:
+            raise InputError(f"gather_radius_px must be <= 1e6, got {self.gather_radius_px}")
         for name in ("segment_length_px", "area_min", "area_max", "min_depth_points", "min_votes"):
             if getattr(self, name) >= 2**31:
                 raise InputError(f"{name} must be < 2**31, got {getattr(self, name)}")
