@@ -22,6 +22,10 @@ SUBCOMMANDS: dict[str, str] = {
     "scene": "build and settle a scene, render RGB/depth/labels, move a hose, write GT flow",
     "episode": "one interaction: grasp a hose, periodic actions, retreat, target frame, record",
     "explore": "explore a hose: grasps, motion correlation, grasp sampler, merged votes, metrics",
+    "calibrate": "eye-to-hand camera calibration with a ChArUco board in the gripper",
+    "view": "write a rerun recording (.rrd) of a recording or run folder, or open one",
+    "segment": "run perception on a recorded interaction (any layout): votes, masks, scores",
+    "twin": "the real-robot path with no hardware: franka-sim + a digital twin + RealSense",
 }
 
 

@@ -251,6 +251,24 @@ def check_vector(
     return tuple(check_number(f"{field}[{i}]", v, lo, limit, error) for i, v in enumerate(value))
 
 
+class Config:
+    """Mixin of the top-level config dataclasses: ``replace``, ``to_dict``, ``from_dict`` and a
+    JSON ``str`` (every config is typed, printable and reloadable the same way)."""
+
+    def replace(self: T, **changes: Any) -> T:
+        return dataclasses.replace(self, **changes)  # type: ignore[type-var]
+
+    def to_dict(self) -> dict[str, Any]:
+        return to_dict(self)
+
+    @classmethod
+    def from_dict(cls: type[T], data: dict[str, Any]) -> T:
+        return from_dict(cls, data)
+
+    def __str__(self) -> str:
+        return pretty(self)
+
+
 def check_range(
     field: str, value: tuple[float, float], lo: float | None = None, hi: float | None = None
 ) -> None:

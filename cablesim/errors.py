@@ -27,3 +27,8 @@ class UnreachableError(CablesimError, RuntimeError):
 
 class RecordingError(CablesimError, IOError):
     """A recording on disk is truncated, corrupt or of an unknown version."""
+
+
+class CalibrationError(CablesimError, ValueError):
+    """A calibration file that is missing, unreadable or lacks a valid field (the message names
+    the file and the field), or a calibration that could not be computed."""

@@ -24,14 +24,23 @@ __all__ = ["GRADES", "Evaluator", "f04_reward", "scores_dict"]
 
 
 def scores_dict(pred: np.ndarray, truth: np.ndarray) -> dict[str, float]:
-    """Precision, recall, F_0.4, F_1, IoU and pixel counts of ``pred`` against ``truth``."""
+    """Precision, recall, F_0.4, F_1, IoU and pixel counts of ``pred`` against ``truth``.
+
+    One interaction's numbers for reports, infos and the reward: a score that is undefined
+    (the precision of an empty prediction, ...) reads 0 here.  Means over sequences follow
+    SPEC section 7 with :func:`cablesim.perception.metrics.mean_scores`, which leaves them out.
+    """
     s = score_mask(pred, truth)
+
+    def num(v: float) -> float:
+        return 0.0 if np.isnan(v) else float(v)
+
     return {
-        "precision": s.precision,
-        "recall": s.recall,
-        "f0.4": s.f[0.4],
-        "f1": s.f[1.0],
-        "iou": s.iou,
+        "precision": num(s.precision),
+        "recall": num(s.recall),
+        "f0.4": num(s.f[0.4]),
+        "f1": num(s.f[1.0]),
+        "iou": num(s.iou),
         "pixels": int(np.count_nonzero(pred)),
         "truth_pixels": int(np.count_nonzero(truth)),
     }

@@ -8,7 +8,7 @@ Format (``FORMAT = "cablesim-recording"``, ``VERSION = 1``), one directory::
                           "action", "sample", "timestamp"}
     frames/000012.npz    compressed: rgb (HxWx3 uint8), depth (HxW float32 m), gripper (3,),
                          action, sample, timestamp, [gripper_quat (4,), gripper_opening,
-                         labels (HxW int16), grasped_hose (-1 = none)]
+                         labels (HxW int16), grasped_hose (-1 = none), arm_mask (HxW bool)]
     flow/000012.npz      compressed: flow_to_target (HxWx2 float32), flow_valid (HxW bool)
 
 Every file is written to a unique temporary name, flushed, fsynced and renamed, then its
@@ -19,7 +19,9 @@ then reports ``complete = False``.  A missing, truncated, corrupt or inconsisten
 index entry that names another file than its frame's, values that differ from the index,
 labels or flow of the wrong size) raises :class:`RecordingError` naming the file and the
 frame.  Ground truth (labels, flow) is stored only when the frames carry it; a real or
-replayed recording has none.
+replayed recording has none.  ``arm_mask`` (the kinematic arm mask, not ground truth) is
+stored when the frame has one; recordings written before it existed read back with
+``arm_mask = None``.
 
 Overwriting (``overwrite=True`` over an existing recording) writes the new recording into a
 hidden sibling directory (``.NAME.new-*``) and swaps it with the old one when the writer is
@@ -145,6 +147,8 @@ def _frame_arrays(frame: Frame) -> dict[str, np.ndarray]:
         a["labels"] = np.asarray(frame.truth.labels, np.int16)
         gh = frame.truth.grasped_hose
         a["grasped_hose"] = np.int64(-1 if gh is None else gh)
+    if frame.arm_mask is not None:
+        a["arm_mask"] = np.asarray(frame.arm_mask, bool)
     return a
 
 
@@ -453,6 +457,7 @@ class Recording:
                 gripper_quat=a.get("gripper_quat"),
                 gripper_opening=None if opening is None else _scalar(a, "gripper_opening", float),
                 truth=truth,
+                arm_mask=a.get("arm_mask"),
             )
         except KeyError as e:
             raise RecordingError(f"{where}: frame {i} lacks {e}") from e

@@ -27,6 +27,7 @@ STREAMS: tuple[str, ...] = (
     "rgb_noise",  # the simulated camera's RGB sensor noise
     "scene_resample",  # documented re-draws of a scene that does not meet its guarantees
     "grasp_retry",  # neighbouring points tried when a grasp does not hold
+    "calibration",  # the board poses drawn by ``cablesim calibrate``
 )
 
 

@@ -316,27 +316,19 @@ class HoseExploreEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _line_segment(self, point: np.ndarray, angle: float) -> np.ndarray | None:
-        import cv2
+        from cablesim.perception.geometry import line_segment_mask
 
         h, w = self.config.height, self.config.width
         pt = np.clip(point, 0.0, 1.0)
-        u = min(int(pt[0] * w), w - 1)
-        v = min(int(pt[1] * h), h - 1)
-        depth = self._image.depth
-        z = depth[max(v - 2, 0) : v + 3, max(u - 2, 0) : u + 3]
-        z = z[(z > 0) & np.isfinite(z)]
-        if z.size == 0:
-            return None
-        half = 0.5 * self.config.segment_length * self._image.intrinsics.f / float(np.median(z))
-        half = max(half, 3.0)
-        a = angle * math.pi / 2
-        du, dv = half * math.cos(a), half * math.sin(a)
-        mask = np.zeros((h, w), np.uint8)
-        p0 = (int(round(u - du)), int(round(v - dv)))
-        p1 = (int(round(u + du)), int(round(v + dv)))
-        cv2.line(mask, p0, p1, 1, thickness=2)
-        mask = mask.astype(bool) & (depth > 0)
-        return mask if mask.sum() >= 5 else None
+        img = self._image
+        return line_segment_mask(
+            img.depth,
+            img.intrinsics,
+            pt[0] * w,
+            pt[1] * h,
+            angle * math.pi / 2,
+            self.config.segment_length,
+        )
 
     def _flow_to_previous(self, new_rgb: np.ndarray) -> np.ndarray | None:
         """Flow from the new image to the previous one (new(p) = previous(p + f)): DIS
@@ -377,7 +369,7 @@ class HoseExploreEnv(gym.Env):
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array" or self._image is None:
             return None
-        from cablesim.policies.report import overlay_votes
+        from cablesim.viz import overlay_votes
 
         votes = self._merger.votes if self._merger.votes is not None else None
         img = self._image.rgb if votes is None else overlay_votes(self._image.rgb, votes)

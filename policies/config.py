@@ -14,9 +14,8 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
 
-from cablesim.config import check_fields, check_int, from_dict, pretty, to_dict
+from cablesim.config import Config, check_fields, check_int
 from cablesim.errors import ConfigError
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.grasp_sampler import GraspSamplerParams
@@ -30,7 +29,7 @@ MERGES = ("dis", "oracle", "none")
 
 
 @dataclass
-class ExploreConfig:
+class ExploreConfig(Config):
     """An exploration: start segment, then up to ``grasps`` interactions on the same hose.
 
     strategy: ``sampler`` (the thesis policy: grasp sampler on the merged votes),
@@ -122,16 +121,3 @@ class ExploreConfig:
         self.perturb.validate()
         self.episode_config().validate()
         return self
-
-    def replace(self, **changes: Any) -> ExploreConfig:
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return to_dict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> ExploreConfig:
-        return from_dict(cls, data)
-
-    def __str__(self) -> str:
-        return pretty(self)

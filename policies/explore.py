@@ -258,7 +258,9 @@ def front_segment(
 class Exploration:
     """The exploration loop over a session (simulated or real): interactions on one hose,
     segmentation, merged votes, next proposal.  ``evaluator`` (simulation only) scores and
-    grades; without one nothing is scored.  Call :meth:`run`."""
+    grades; without one nothing is scored.  With ``record_to`` every interaction is recorded
+    as it happens to ``record_to/interaction{k}`` (:mod:`cablesim.recording`).  Call
+    :meth:`run`."""
 
     def __init__(
         self,
@@ -270,7 +272,7 @@ class Exploration:
         writer: Any = None,
         say: Say = quiet,
         flow_kwargs: dict[str, Any] | None = None,
-        sink_for: Callable[[int], Any] | None = None,
+        record_to: Path | None = None,
     ) -> None:
         self.session, self.cfg, self.ev, self.writer, self.say = (
             session,
@@ -279,8 +281,9 @@ class Exploration:
             writer,
             say,
         )
-        self.sink_for = sink_for
-        self.interaction_cfg = session.cfg.interaction if hasattr(session, "cfg") else None
+        self.record_to = None if record_to is None else Path(record_to)
+        self.published: list[str] = []  # sequences written in the published layout
+        self.interaction_cfg = session.cfg.interaction
         self.T = np.asarray(session.T_world_camera, float)
         self.flow = make_flow(cfg.flow, **(flow_kwargs or {}))
         self.reachable = grasp_reachability(session.robot, self.T, self.interaction_cfg)
@@ -338,8 +341,7 @@ class Exploration:
             res.grade(grade)
         say(f"interaction {k} ({self.source}, {grade}): on {int(self.segment.sum())} px")
         t0 = time.perf_counter()
-        sink = self.sink_for(k) if self.sink_for is not None else None
-        ep = self.session.interact(self.segment, self.interaction_cfg, sink=sink)
+        ep = self._interact(k)
         inter = Interaction(k, ep.success, ep.reason, self.source, self.segment, grade)
         inter.timings["episode"] = time.perf_counter() - t0
         inter.episode = {
@@ -364,6 +366,43 @@ class Exploration:
             self.sampler.add_grasp(centre_cam, self.segment, blacklist=True)
             self.previous_centres.append(centre_cam)
         return inter
+
+    def _interact(self, k: int) -> Any:
+        """One interaction on the current segment, recorded as it happens when asked."""
+        if self.record_to is None:
+            return self.session.interact(self.segment, self.interaction_cfg, say=self.say)
+        from cablesim.recording import RecordingWriter
+
+        meta = {"interaction_index": k, "source": self.source, "seed": self.session.cfg.seed}
+        writer = RecordingWriter(self.record_to / f"interaction{k}", meta=meta)
+        try:
+            ep = self.session.interact(self.segment, self.interaction_cfg, writer, self.say)
+        except BaseException:
+            writer.close({"result": "interrupted"}, complete=False)
+            raise
+        final = dict(ep.stream.meta) if ep.stream is not None else {}
+        final["result"] = ep.to_dict()
+        writer.close(final, complete=ep.success)
+        if ep.stream is not None:
+            self._write_published(k, ep.stream)
+        return ep
+
+    def _write_published(self, k: int, stream: Stream) -> None:
+        """The interaction again in the published motion-correlation layout (SPEC 8), with the
+        exploration's sequences listed as one multi-grasp group."""
+        from cablesim.formats.mcor import write_mcor, write_multigrasp
+
+        assert self.record_to is not None
+        masks = [f.arm_mask for f in stream.frames]
+        write_mcor(
+            self.record_to / "mcor" / f"interaction{k}",
+            stream,
+            segment=self.segment,
+            arm_masks=dict(enumerate(masks)) if all(m is not None for m in masks) else None,
+            base_to_camera=np.linalg.inv(self.T) @ self.session.T_world_base,
+        )
+        self.published.append(f"interaction{k}")
+        write_multigrasp(self.record_to / "mcor" / "multigrasp_sequences.json", [self.published])
 
     def _centre_in_camera(self, ep: Any) -> np.ndarray | None:
         if ep.centre is not None:
@@ -450,9 +489,11 @@ def explore(
     out: str | Path | None = None,
     progress: Say | None = None,
     flow_kwargs: dict[str, Any] | None = None,
+    record_to: str | Path | None = None,
 ) -> ExplorationResult:
     """Run one simulated exploration (see the module docstring); with ``out`` write pictures, a
-    video and ``metrics.json`` there (:mod:`cablesim.policies.report`)."""
+    video and ``metrics.json`` there (:mod:`cablesim.policies.report`); with ``record_to``
+    record every interaction's stream there."""
     from cablesim.sim.session import SimSession
 
     from .report import ExplorationWriter
@@ -479,7 +520,15 @@ def explore(
         if writer is not None:
             writer.start(start.rgb, picked.mask)
         run = Exploration(
-            session, cfg, picked.mask, start, session.evaluator(), writer, say, flow_kwargs
+            session,
+            cfg,
+            picked.mask,
+            start,
+            session.evaluator(),
+            writer,
+            say,
+            flow_kwargs,
+            None if record_to is None else Path(record_to),
         )
         run.result.timings["build"] = session.build_time
         result = run.run()

@@ -1,16 +1,24 @@
 """What an exploration writes for a person to look at.
 
-Files in the output directory:
+Files in the output directory (every picture is a row of titled tiles, :mod:`cablesim.viz`):
 
 - ``start.png``: the start image with the given segment in magenta;
-- ``interaction{k}_votes.png``: [target RGB | votes in shades of green over it (darker = fewer
-  actions) | ground truth (hose of interest, white) | the segment the interaction aimed at];
-- ``interaction{k}_flow.png``: estimated flow | ground-truth flow of the kept frame farthest
-  from the target (HSV wheel: hue = direction, brightness = magnitude, same scale);
-- ``interaction{k}_maps.png``: |c0| and R^2 of each action (correlation/ablation only);
+- ``interaction{k}_votes.png``: target RGB | votes in shades of green over it (darker = fewer
+  actions) | ground truth (hose of interest, white) | the segment the interaction aimed at;
+- ``interaction{k}_errors.png``: the interaction's mask (votes >= 1) against ground truth:
+  true positives green, false positives red, false negatives blue, with pixel counts;
+- ``interaction{k}_flow.png``: estimated | ground-truth flow of the kept frame farthest
+  from the target (HSV wheel: hue = direction, brightness = magnitude, same scale), with the
+  wheel as a key;
+- ``interaction{k}_maps.png``: |c0| and R^2 of each action with colour bars
+  (correlation/ablation only);
+- ``interaction{k}_votes.npy``, ``merged_votes.npy``: the vote images (HxW int16), for
+  ``cablesim view``;
 - ``merged.png``: merged votes of all interactions over the final target | ground truth;
-- ``episode.mp4`` (OpenCV ``mp4v``; checked by reading it back, else ``episode.gif``): every
-  kept frame of every interaction, then the merged votes;
+- ``merged_errors.png``: the merged mask (votes >= ``merged_votes``) against ground truth;
+- ``episode.mp4`` (H.264, :class:`cablesim.video.VideoWriter`; OpenCV ``mp4v`` if H.264
+  cannot be written, an animated GIF if no mp4 reads back): every kept frame of every
+  interaction, then the votes;
 - ``metrics.json``: per interaction and merged precision, recall, F_0.4, F_1, IoU, the config.
 """
 
@@ -20,132 +28,24 @@ import json
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from cablesim.jsonutil import json_default
 from cablesim.perception.frames import Stream
-
-GREEN = np.array([0, 255, 0], np.float32)
-
-
-def overlay_votes(rgb: np.ndarray, votes: np.ndarray, max_votes: int | None = None) -> np.ndarray:
-    """Votes in shades of green over a darkened RGB image (as in the thesis figures)."""
-    base = rgb.astype(np.float32) * 0.6
-    top = max(int(max_votes or votes.max(initial=0)), 1)
-    a = np.clip(votes.astype(np.float32) / top, 0, 1)[..., None]
-    a = np.where(votes[..., None] > 0, 0.35 + 0.65 * a, 0.0)
-    out = base * (1 - a) + GREEN * a
-    return np.clip(out, 0, 255).astype(np.uint8)
-
-
-def overlay_mask(rgb: np.ndarray, mask: np.ndarray, colour=(255, 255, 255)) -> np.ndarray:
-    out = (rgb.astype(np.float32) * 0.4).astype(np.uint8)
-    out[mask] = colour
-    return out
-
-
-def colour_flow(flow: np.ndarray, max_mag: float | None = None) -> np.ndarray:
-    """RGB uint8 HSV wheel: hue = direction, value = magnitude / max_mag."""
-    mag = np.linalg.norm(flow, axis=-1)
-    ang = np.arctan2(flow[..., 1], flow[..., 0])
-    mm = float(max_mag if max_mag is not None else max(mag.max(initial=0.0), 1e-6))
-    hsv = np.zeros((*flow.shape[:2], 3), np.uint8)
-    hsv[..., 0] = np.round((ang + np.pi) / (2 * np.pi) * 179).astype(np.uint8)
-    hsv[..., 1] = 255
-    hsv[..., 2] = np.round(np.clip(mag / max(mm, 1e-6), 0, 1) * 255).astype(np.uint8)
-    return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
-
-
-def colour_map(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    s = np.clip((np.nan_to_num(x) - lo) / max(hi - lo, 1e-9), 0, 1)
-    bgr = cv2.applyColorMap((s * 255).astype(np.uint8), cv2.COLORMAP_VIRIDIS)
-    return bgr[..., ::-1].copy()
-
-
-def hstack(tiles: list[np.ndarray], sep: int = 4) -> np.ndarray:
-    h = tiles[0].shape[0]
-    bar = np.full((h, sep, 3), 255, np.uint8)
-    row: list[np.ndarray] = []
-    for t in tiles:
-        row += [t, bar]
-    return np.concatenate(row[:-1], axis=1)
-
-
-def label(img: np.ndarray, text: str) -> np.ndarray:
-    out = img.copy()
-    scale = max(0.35, img.shape[1] / 1200)
-    cv2.putText(out, text, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, scale, (0, 0, 0), 3, cv2.LINE_AA)
-    cv2.putText(out, text, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1)
-    return out
-
-
-def write_png(path: Path, rgb: np.ndarray) -> None:
-    cv2.imwrite(str(path), np.ascontiguousarray(rgb[..., ::-1]))
-
-
-class VideoWriter:
-    """mp4 (OpenCV ``mp4v``) written frame by frame; verified on close by reading it back.
-    Falls back to an animated GIF (imageio/Pillow) when no mp4 encoder works."""
-
-    def __init__(self, path: Path, fps: float = 15.0, max_gif_frames: int = 300) -> None:
-        self.path, self.fps = path, fps
-        self.frames_written = 0
-        self._size: tuple[int, int] | None = None
-        self._cv: cv2.VideoWriter | None = None
-        self._gif: list[np.ndarray] = []
-        self._max_gif = max_gif_frames
-        self.final_path: Path | None = None
-
-    def write(self, rgb: np.ndarray) -> None:
-        h, w = rgb.shape[:2]
-        if self._size is None:
-            self._size = (w - w % 2, h - h % 2)
-            self._cv = cv2.VideoWriter(
-                str(self.path), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, self._size
-            )
-            if not self._cv.isOpened():
-                self._cv = None
-        frame = np.ascontiguousarray(rgb[: self._size[1], : self._size[0]])
-        if self._cv is not None:
-            self._cv.write(np.ascontiguousarray(frame[..., ::-1]))
-        if len(self._gif) < self._max_gif:  # kept in case the mp4 does not read back
-            self._gif.append(cv2.resize(frame, (frame.shape[1] // 2, frame.shape[0] // 2)))
-        self.frames_written += 1
-
-    def close(self) -> Path | None:
-        if self._cv is not None:
-            self._cv.release()
-            self._cv = None
-            if count_video_frames(self.path) == self.frames_written > 0:
-                self.final_path = self.path
-                self._gif = []
-                return self.final_path
-        if self._gif:
-            import imageio.v2 as imageio
-
-            gif = self.path.with_suffix(".gif")
-            imageio.mimsave(gif, self._gif[::2], duration=2.0 / self.fps, loop=0)
-            self.final_path = gif
-            if self.path.exists():
-                self.path.unlink()
-        self._gif = []
-        return self.final_path
-
-
-def count_video_frames(path: Path) -> int:
-    """Frames OpenCV can decode from a video file (0 if it cannot be opened)."""
-    cap = cv2.VideoCapture(str(path))
-    n = 0
-    try:
-        while cap.isOpened():
-            ok, _ = cap.read()
-            if not ok:
-                break
-            n += 1
-    finally:
-        cap.release()
-    return n
+from cablesim.video import VideoWriter, count_video_frames
+from cablesim.viz import (
+    SEGMENT_COLOUR,
+    colour_flow,
+    colour_map,
+    errors_tile,
+    label,
+    overlay_mask,
+    overlay_votes,
+    panel,
+    with_colour_bar,
+    with_flow_wheel,
+    write_png,
+)
 
 
 def flow_example(stream: Stream, flow: Any) -> tuple[np.ndarray, np.ndarray] | None:
@@ -178,10 +78,13 @@ class ExplorationWriter:
         write_png(self.out / name, rgb)
         self.files.append(name)
 
+    def _npy(self, name: str, votes: np.ndarray) -> None:
+        np.save(self.out / name, np.asarray(votes, np.int16))
+        self.files.append(name)
+
     def start(self, rgb: np.ndarray, segment: np.ndarray) -> None:
-        img = rgb.copy()
-        img[segment] = (255, 0, 255)
-        self._png("start.png", img)
+        img = overlay_mask(rgb, segment, SEGMENT_COLOUR, dim=1.0)
+        self._png("start.png", panel([img], ["start image, given segment (magenta)"]))
         for _ in range(8):
             self.video.write(label(img, "start segment"))
 
@@ -197,38 +100,89 @@ class ExplorationWriter:
         rgb, seg = inter.target_rgb, inter.seg
         n_actions = max(len(seg.masks), 1)
         tiles = [rgb, overlay_votes(rgb, seg.votes, n_actions)]
+        titles = [f"interaction {k}: target frame", f"votes (of {n_actions} actions)"]
         if inter.truth is not None:
             tiles.append(overlay_mask(rgb, inter.truth))
+            titles.append("ground truth: hose of interest")
         if inter.segment is not None:
-            tiles.append(overlay_mask(rgb, inter.segment, (255, 0, 255)))
-        self._png(f"interaction{k}_votes.png", hstack(tiles))
+            tiles.append(overlay_mask(rgb, inter.segment, SEGMENT_COLOUR))
+            titles.append(f"aimed segment ({inter.source})")
+        self._png(f"interaction{k}_votes.png", panel(tiles, titles))
+        self._npy(f"interaction{k}_votes.npy", seg.votes)
+        if inter.truth is not None:
+            self._errors(
+                f"interaction{k}_errors.png",
+                rgb,
+                seg.mask(1),
+                inter.truth,
+                inter.scores,
+                f"interaction {k}: votes >= 1 vs ground truth",
+            )
         if inter.flow_example is not None:
             est, gt = inter.flow_example
             mm = float(max(np.linalg.norm(gt, axis=-1).max(initial=0), 1.0))
+            name = getattr(flow, "name", None) or getattr(self.config, "flow", "estimated")
             self._png(
-                f"interaction{k}_flow.png", hstack([colour_flow(est, mm), colour_flow(gt, mm)])
+                f"interaction{k}_flow.png",
+                panel(
+                    [colour_flow(est, mm), with_flow_wheel(colour_flow(gt, mm), mm)],
+                    [f"estimated flow ({name})", "ground-truth flow"],
+                ),
             )
         if seg.c0:
-            tiles = []
+            tiles, titles = [], []
             for a in sorted(seg.c0):
-                tiles.append(label(colour_map(np.abs(seg.c0[a]), 0.0, 1.0), f"|c0| action {a}"))
-                tiles.append(label(colour_map(seg.r2[a], 0.0, 1.0), f"R^2 action {a}"))
-            self._png(f"interaction{k}_maps.png", hstack(tiles))
+                tiles.append(with_colour_bar(colour_map(np.abs(seg.c0[a]), 0.0, 1.0), 0.0, 1.0))
+                titles.append(f"|c0|, action {a}")
+                tiles.append(with_colour_bar(colour_map(seg.r2[a], 0.0, 1.0), 0.0, 1.0))
+                titles.append(f"R^2, action {a}")
+            self._png(f"interaction{k}_maps.png", panel(tiles, titles))
         for _ in range(10):
             self.video.write(label(overlay_votes(rgb, seg.votes, n_actions), f"votes {k}"))
         if merged_votes is not None:
             for _ in range(10):
                 self.video.write(label(overlay_votes(rgb, merged_votes), f"merged after {k}"))
 
+    def _errors(
+        self,
+        name: str,
+        rgb: np.ndarray,
+        pred: np.ndarray,
+        truth: np.ndarray,
+        scores: dict[str, float],
+        title: str,
+    ) -> None:
+        if scores:
+            title += (
+                f": P {scores['precision']:.2f}, R {scores['recall']:.2f}, "
+                f"F0.4 {scores['f0.4']:.2f}"
+            )
+        self._png(name, panel([errors_tile(rgb, pred, truth)], [title]))
+
     def failed(self, inter: Any) -> None:
         pass
 
     def finish(self, result: Any) -> None:
         if result.merged_votes is not None and result.final_rgb is not None:
-            tiles = [overlay_votes(result.final_rgb, result.merged_votes)]
+            rgb, votes = result.final_rgb, result.merged_votes
+            n = len(result.successes)
+            tiles = [overlay_votes(rgb, votes)]
+            titles = [f"merged votes of {n} interaction{'s' * (n != 1)} (final target)"]
             if result.final_truth is not None:
-                tiles.append(overlay_mask(result.final_rgb, result.final_truth))
-            self._png("merged.png", hstack(tiles))
+                tiles.append(overlay_mask(rgb, result.final_truth))
+                titles.append("ground truth: hose of interest")
+            self._png("merged.png", panel(tiles, titles))
+            self._npy("merged_votes.npy", votes)
+            if result.final_truth is not None:
+                threshold = int(getattr(self.config, "merged_votes", 1))
+                self._errors(
+                    "merged_errors.png",
+                    rgb,
+                    votes >= threshold,
+                    result.final_truth,
+                    result.merged,
+                    f"merged votes >= {threshold} vs ground truth",
+                )
         video = self.video.close()
         metrics = result.metrics()
         metrics["files"] = sorted(self.files + ([video.name] if video is not None else []))
@@ -238,3 +192,17 @@ class ExplorationWriter:
 
     def close(self) -> None:
         self.video.close()
+
+
+# drawing and video helpers live in cablesim.viz / cablesim.video; these names stay importable
+# from here for existing callers
+__all__ = [
+    "ExplorationWriter",
+    "VideoWriter",
+    "colour_flow",
+    "count_video_frames",
+    "flow_example",
+    "overlay_mask",
+    "overlay_votes",
+    "write_png",
+]

@@ -1,13 +1,15 @@
 """The house's seams: what each layer may import (checked module by module in a fresh
 interpreter).
 
-- ``perception`` and ``camera``: neither the simulator (``cablesim.sim``, MuJoCo) nor any layer
+- ``perception``, ``formats`` and ``camera``: neither the simulator (``cablesim.sim``, MuJoCo) nor any layer
   above them (``episode``, ``policies``, ``envs``);
 - ``robot``: nothing of the simulator, ``episode``, ``policies`` or ``envs`` (the real arm
   reads the Panda's description in ``cablesim.panda``, whose arm-only kinematics model uses
   MuJoCo as a geometry library, never ``cablesim.sim``);
 - ``episode`` (the interaction runner shared by the simulated and the real robot): nothing of
   ``cablesim.sim``, ``policies`` or ``envs``.
+
+The digital twin (``cablesim.twin``) counts as simulation: none of them imports it.
 """
 
 from __future__ import annotations
@@ -19,9 +21,10 @@ import sys
 import pytest
 
 ABOVE = ("cablesim.episode", "cablesim.policies", "cablesim.envs")
-SIM = ("cablesim.sim",)
+SIM = ("cablesim.sim", "cablesim.twin")  # the digital twin is simulation too
 RULES = {
     "cablesim.perception": SIM + ABOVE + ("mujoco",),
+    "cablesim.formats": SIM + ABOVE + ("mujoco",),
     "cablesim.camera": SIM + ABOVE + ("mujoco",),
     "cablesim.robot": SIM + ABOVE,
     "cablesim.episode": SIM + ("cablesim.policies", "cablesim.envs"),

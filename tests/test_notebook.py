@@ -1,4 +1,4 @@
-"""The prototyping notebook runs top to bottom on a tiny configuration (CABLESIM_NB_SMALL=1)."""
+"""The executed notebooks run top to bottom on a tiny configuration (CABLESIM_NB_SMALL=1)."""
 
 from __future__ import annotations
 
@@ -11,29 +11,33 @@ import pytest
 from jupyter_client.kernelspec import KernelSpecManager
 from nbclient import NotebookClient
 
-NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "01_prototyping.ipynb"
+NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
+#: notebook -> strings its outputs must contain
+EXPECTED = {
+    "01_prototyping.ipynb": ("correlation", "interaction ok"),
+    "02_sequences.ipynb": ("layouts: cablesim-recording / mcor", "published", "[segment] union"),
+}
 
 
 @pytest.mark.slow
-def test_prototyping_notebook_executes(monkeypatch):
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_notebook_executes(name, monkeypatch):
     # the "python3" kernel spec of this environment's ipykernel; jupyter_client replaces its
     # "python" with sys.executable, so the kernel is this interpreter (the venv's)
     spec = KernelSpecManager().get_kernel_spec("python3")
     assert spec.argv[0] in ("python", "python3", sys.executable), spec.argv
     monkeypatch.setenv("CABLESIM_NB_SMALL", "1")
-    nb = nbformat.read(NOTEBOOK, as_version=4)
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
     client = NotebookClient(
-        nb,
-        kernel_name="python3",
-        timeout=300,
-        resources={"metadata": {"path": str(NOTEBOOK.parent)}},
+        nb, kernel_name="python3", timeout=300, resources={"metadata": {"path": str(NOTEBOOKS)}}
     )
     client.execute(env=dict(os.environ))
     text = "".join(
         o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])
     )
     assert f"python: {sys.executable}" in text
-    assert "correlation" in text and "interaction ok" in text
+    for expected in EXPECTED[name]:
+        assert expected in text, expected
     images = [
         o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []) if "data" in o
     ]

@@ -2,12 +2,16 @@
 
     cam = RealSenseCamera()                          # the first connected camera, 640x480 @ 15 fps
     cam = RealSenseCamera("session.db3")             # a RealSense recording, frame by frame
+    cam = RealSenseCamera(device=dev, syncer=sync)   # a device already streaming into a syncer
     img = cam.capture()                              # depth aligned to colour, in metres
 
 ``write_recording`` turns any sequence of ``CameraImage`` (for example from ``SimCamera``) into a
 RealSense recording through librealsense's software device, so the real-camera code path can be
 exercised and tested with no camera attached.  A recording is read whole (every frame,
-not real time) when the camera is opened.  Requires the ``real`` extra (``pyrealsense2``;
+not real time) when the camera is opened.  ``device``/``syncer`` open a camera on a device
+whose depth and colour sensors somebody else already started into an ``rs.syncer``, e.g. a
+software device fed frame by frame while it runs (the digital twin, :mod:`cablesim.twin`);
+frames are then read exactly as from a camera.  Requires the ``real`` extra (``pyrealsense2``;
 on Debian also ``libusb-1.0-0``).  librealsense 2.59 writes and reads ``.db3`` recordings.
 """
 
@@ -47,6 +51,9 @@ class RealSenseCamera(Camera):
         serial: str | None = None,
         T_world_camera: np.ndarray | None = None,
         timeout_s: float = 2.0,
+        *,
+        device=None,
+        syncer=None,
     ):
         rs = _rs()
         self._rs = rs
@@ -56,8 +63,12 @@ class RealSenseCamera(Camera):
             raise InputError(f"T_world_camera must be 4x4, got {self._T.shape}")
         self.source = None if source is None else Path(source)
         self._closed = False
+        self._owns_pipe = True
         if self.source is not None:
             self._open_recording(self.source)
+            return
+        if device is not None or syncer is not None:
+            self._open_streaming_device(device, syncer)
             return
         self._pipe = rs.pipeline()
         cfg = rs.config()
@@ -74,6 +85,32 @@ class RealSenseCamera(Camera):
         depth = profile.get_stream(rs.stream.depth).as_video_stream_profile()
         self._align = None if _same_camera(depth, color) else rs.align(rs.stream.color)
         self._intrinsics = _intrinsics(color)
+
+    def _open_streaming_device(self, device, syncer) -> None:
+        """Read a device whose depth and colour sensors already stream into ``syncer``; the
+        caller owns the device and stops its sensors (``close`` only stops reading)."""
+        rs = self._rs
+        if device is None or syncer is None:
+            raise InputError("a streaming device needs both device= and syncer=")
+        depth = color = None
+        scale = 0.001
+        for sensor in device.query_sensors():
+            for p in sensor.get_active_streams():
+                if p.stream_type() == rs.stream.depth:
+                    depth = p.as_video_stream_profile()
+                    if sensor.is_depth_sensor():
+                        scale = float(sensor.as_depth_sensor().get_depth_scale())
+                elif p.stream_type() == rs.stream.color:
+                    color = p.as_video_stream_profile()
+        if depth is None or color is None:
+            raise RecordingError(
+                "the RealSense device streams no depth and colour: start its sensors into the "
+                "syncer first"
+            )
+        self._depth_scale = scale
+        self._intrinsics = _intrinsics(color)
+        self._align = None if _same_camera(depth, color) else rs.align(rs.stream.color)
+        self._pipe, self._owns_pipe = syncer, False
 
     def _open_recording(self, path: Path) -> None:
         """Read a whole recording (non-real-time, nothing dropped) into memory, paired by time."""
@@ -176,7 +213,9 @@ class RealSenseCamera(Camera):
                 frames = self._align.process(frames)
             depth = frames.get_depth_frame() or depth
             color = frames.get_color_frame() or color
-            if depth and color:
+            # a frame set may hold one stream only (at the start, or after a stall); depth and
+            # colour from different sets are paired only when they are of the same instant
+            if depth and color and _same_instant(depth, color):
                 break
         else:
             raise RecordingError("no matching depth and colour frames in 8 frame sets")
@@ -193,7 +232,7 @@ class RealSenseCamera(Camera):
 
     def close(self) -> None:
         if not self._closed:
-            if self.source is None:
+            if self.source is None and self._owns_pipe:
                 self._pipe.stop()
             self._closed = True
 
@@ -201,6 +240,12 @@ class RealSenseCamera(Camera):
 def _intrinsics(profile) -> Intrinsics:
     i = profile.get_intrinsics()
     return Intrinsics(i.fx, i.fy, i.ppx, i.ppy, i.width, i.height)
+
+
+def _same_instant(depth, color) -> bool:
+    """Whether a depth and a colour frame were taken within half a frame period."""
+    fps = color.get_profile().fps() or 15
+    return abs(depth.get_timestamp() - color.get_timestamp()) <= 500.0 / fps
 
 
 def _same_camera(depth, color) -> bool:

@@ -5,15 +5,13 @@ alike)."""
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from cablesim.errors import InputError, RecordingError
+from cablesim.errors import InputError
+from cablesim.panda.visuals import VISUALS
 from cablesim.sim.config import SceneConfig
 
 
@@ -63,19 +61,17 @@ def check_settle_cache(scene: SceneConfig) -> None:
         scene.physics.cache = False
 
 
-def write_image(path: Path, image: np.ndarray) -> None:
-    """``cv2.imwrite`` that fails loudly (OpenCV only returns False)."""
-    import cv2
-
-    if not cv2.imwrite(os.fspath(path), image):
-        raise RecordingError(f"{path}: could not be written")
-
-
 def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed") -> None:
     p.add_argument("--seed", type=int, default=0, help=f"{seed_help} (default 0)")
     p.add_argument("--hoses", type=int, default=None, help="number of hoses (default 4)")
     p.add_argument("--width", type=int, default=None, help="image width (default 640)")
     p.add_argument("--height", type=int, default=None, help="image height (default 480)")
+    p.add_argument(
+        "--robot-visual",
+        choices=VISUALS,
+        default=None,
+        help="how the arm is drawn: primitive (default) or mesh (franka_ros's meshes; same physics)",
+    )
 
 
 def add_interaction_arguments(p: argparse.ArgumentParser) -> None:
@@ -92,6 +88,8 @@ def apply_scene_arguments(scene: SceneConfig, args: argparse.Namespace) -> Scene
         scene.camera.width = args.width
     if getattr(args, "height", None) is not None:
         scene.camera.height = args.height
+    if getattr(args, "robot_visual", None) is not None:
+        scene.robot.visual = args.robot_visual
     return scene
 
 

@@ -6,8 +6,9 @@ Files in --out:
   recording/         the frame stream (see cablesim.recording; replay with
                      cablesim.camera.replay.ReplayCamera)
   contact_sheet.png  start image with the segment, a few action frames, the target frame and
-                     its ground-truth grasped-hose mask
-  start.png, target.png, target_labels.png
+                     its ground-truth grasped-hose mask (titled tiles)
+  start.png, target.png  the camera's images
+  target_labels.png  the target frame's labels with a key
   summary.json       config, result (gain per action, other hoses' displacement, frames kept,
                      timings); also printed
 """
@@ -27,11 +28,19 @@ from cablesim.commands._args import (
     check_settle_cache,
     output_path,
     prepare_output_dir,
-    write_image,
 )
 from cablesim.perception.frames import LABEL_ROBOT, Stream
 from cablesim.recording import RecordingWriter
 from cablesim.sim.session import EpisodeConfig
+from cablesim.viz import (
+    SEGMENT_COLOUR,
+    colour_labels,
+    hstack,
+    labels_legend,
+    overlay_mask,
+    panel,
+    write_png,
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -52,31 +61,26 @@ def config_from_args(args: argparse.Namespace) -> EpisodeConfig:
     return cfg.validate()
 
 
-def _bgr(rgb: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(rgb[..., ::-1])
-
-
 def contact_sheet(
     start_rgb: np.ndarray, segment: np.ndarray, stream: Stream, n_action_frames: int = 4
 ) -> np.ndarray:
-    """One row: start image (segment in magenta), a few action frames, target, target mask."""
-    start = start_rgb.copy()
-    start[segment] = (255, 0, 255)
+    """One titled row: start image (segment in magenta), a few action frames, target, target
+    mask (grasped hose white, robot red)."""
+    start = overlay_mask(start_rgb, segment, SEGMENT_COLOUR, dim=1.0)
     frames = [f for f in stream.frames if not f.is_target]
     pick = np.linspace(0, len(frames) - 1, min(n_action_frames, len(frames))).round().astype(int)
     tiles = [start] + [frames[i].rgb for i in pick] + [stream.target.rgb]
+    titles = ["start, segment (magenta)"]
+    titles += [f"action {frames[i].action}, t {frames[i].timestamp:.2f} s" for i in pick]
+    titles.append("target frame")
     truth = stream.target.truth
     if truth is not None and truth.grasped_hose is not None:
         mask = np.zeros_like(start)
         mask[truth.labels == truth.grasped_hose] = (255, 255, 255)
         mask[truth.labels == LABEL_ROBOT] = (255, 0, 0)
         tiles.append(mask)
-    h = tiles[0].shape[0]
-    sep = np.full((h, 4, 3), 255, np.uint8)
-    row: list[np.ndarray] = []
-    for t in tiles:
-        row += [t, sep]
-    return np.concatenate(row[:-1], axis=1)
+        titles.append(f"target: hose {truth.grasped_hose} (white), robot (red)")
+    return panel(tiles, titles)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -100,14 +104,14 @@ def run(args: argparse.Namespace) -> int:
         if res.success and res.stream is not None:
             start_img = ep.start_image.rgb
             sheet = contact_sheet(start_img, ep.segment.mask, res.stream)
-            write_image(out / "contact_sheet.png", _bgr(sheet))
-            write_image(out / "start.png", _bgr(start_img))
-            write_image(out / "target.png", _bgr(res.stream.target.rgb))
+            write_png(out / "contact_sheet.png", sheet)
+            write_png(out / "start.png", start_img)
+            write_png(out / "target.png", res.stream.target.rgb)
             t = res.stream.target.truth
             if t is not None:
-                lab = np.where(t.labels >= 0, 60 + 40 * t.labels, 0)
-                lab[t.labels == LABEL_ROBOT] = 255
-                write_image(out / "target_labels.png", lab.astype(np.uint8))
+                h = t.labels.shape[0]
+                labels = hstack([colour_labels(t.labels), labels_legend(t.labels, h)])
+                write_png(out / "target_labels.png", panel([labels], ["target frame: labels"]))
             kept = len(res.stream) - 1
             summary["frames_kept"] = kept
             summary["gain"] = {a.label: a.gain for a in res.actions}

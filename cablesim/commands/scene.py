@@ -2,10 +2,12 @@
 vertex about 3 cm for 0.5 s of physics, render again and write the ground-truth optical flow
 between the two frames.  The same seed gives the same files bit for bit.
 
-Files: rgb.png, depth.png (colour-mapped), depth.npy (float32 metres, 0 = none), labels.png,
-labels.npy (int16: hose index, -2 robot, -1 background), rgb_moved.png, labels_moved.npy,
-flow.png (HSV wheel, invalid black), flow.npy (HxWx2 float32, rgb.png pixels -> rgb_moved.png),
-flow_valid.npy, scene.json (config, intrinsics, camera pose, what was moved).
+Files: rgb.png, depth.png (colour-mapped, with a colour bar in metres), depth.npy (float32
+metres, 0 = none), labels.png (with a key), labels.npy (int16: hose index, -2 robot,
+-1 background), rgb_moved.png, labels_moved.npy, flow.png (HSV wheel, invalid black, with the
+wheel as a key), flow.npy (HxWx2 float32, rgb.png pixels -> rgb_moved.png), flow_valid.npy,
+scene.json (config, intrinsics, camera pose, what was moved).  The pictures carry titles;
+rgb.png and rgb_moved.png are the camera's images as rendered.
 """
 
 from __future__ import annotations
@@ -15,7 +17,6 @@ import json
 import time
 from pathlib import Path
 
-import cv2
 import mujoco
 import numpy as np
 
@@ -25,34 +26,27 @@ from cablesim.commands._args import (
     check_settle_cache,
     output_path,
     prepare_output_dir,
-    write_image,
 )
 from cablesim.config import to_dict
 from cablesim.errors import InputError
 from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
 from cablesim.sim.config import BACKGROUNDS, SceneConfig
+from cablesim.viz import (
+    colour_flow,
+    colour_labels,
+    depth_tile,
+    hstack,
+    labels_legend,
+    panel,
+    with_flow_wheel,
+    write_png,
+)
 
 PULL_DISTANCE = 0.03  # m
 PULL_TIME = 0.5  # s
 PULL_STIFFNESS = 300.0  # N/m
 PULL_DAMPING = 4.0  # N s/m
 PULL_MAX_FORCE = 6.0  # N
-
-LABEL_COLOURS = np.array(  # BGR, per hose index (cycled); robot and background below
-    [
-        [60, 60, 230],
-        [80, 200, 60],
-        [230, 120, 40],
-        [40, 220, 240],
-        [200, 60, 200],
-        [230, 230, 60],
-        [60, 140, 255],
-        [170, 170, 170],
-    ],
-    np.uint8,
-)
-ROBOT_COLOUR = np.array([255, 255, 255], np.uint8)
-BACKGROUND_COLOUR = np.array([0, 0, 0], np.uint8)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -72,42 +66,6 @@ def scene_config(args: argparse.Namespace) -> SceneConfig:
         cfg.robot.enabled = False
     cfg.camera.depth_noise = bool(args.depth_noise)
     return cfg.validate()
-
-
-def colour_depth(depth: np.ndarray) -> np.ndarray:
-    """BGR uint8 colour map of a depth image (near = warm); 0 (no depth) is black."""
-    valid = depth > 0
-    out = np.zeros((*depth.shape, 3), np.uint8)
-    if valid.any():
-        lo, hi = np.percentile(depth[valid], [1, 99])
-        scaled = np.clip((depth - lo) / max(hi - lo, 1e-6), 0, 1)
-        cmap = cv2.applyColorMap((255 * (1 - scaled)).astype(np.uint8), cv2.COLORMAP_TURBO)
-        out[valid] = cmap[valid]
-    return out
-
-
-def colour_labels(labels: np.ndarray) -> np.ndarray:
-    out = np.empty((*labels.shape, 3), np.uint8)
-    out[:] = BACKGROUND_COLOUR
-    out[labels == LABEL_ROBOT] = ROBOT_COLOUR
-    hose = labels >= 0
-    out[hose] = LABEL_COLOURS[labels[hose] % len(LABEL_COLOURS)]
-    out[(labels < 0) & (labels != LABEL_ROBOT) & (labels != LABEL_BACKGROUND)] = 128
-    return out
-
-
-def colour_flow(flow: np.ndarray, valid: np.ndarray, max_mag: float | None = None) -> np.ndarray:
-    """BGR uint8 HSV colour wheel: hue = direction, value = magnitude / max; invalid black."""
-    mag = np.linalg.norm(flow, axis=-1)
-    ang = np.arctan2(flow[..., 1], flow[..., 0])
-    if max_mag is None:
-        max_mag = float(mag[valid].max()) if valid.any() else 1.0
-    hsv = np.zeros((*flow.shape[:2], 3), np.uint8)
-    hsv[..., 0] = np.round((ang + np.pi) / (2 * np.pi) * 179).astype(np.uint8)
-    hsv[..., 1] = 255
-    hsv[..., 2] = np.round(np.clip(mag / max(max_mag, 1e-6), 0, 1) * 255).astype(np.uint8)
-    hsv[~valid] = 0
-    return cv2.cvtColor(hsv, cv2.COLOR_HSV2BGR)
 
 
 def pull_hose(world, hose_index: int, distance: float, duration: float) -> dict:
@@ -174,14 +132,21 @@ def run(args: argparse.Namespace) -> int:
         )
         pulled = pull_hose(world, args.hose, PULL_DISTANCE, PULL_TIME)
         after = cam.snapshot()
-        write_image(out / "rgb_moved.png", cv2.cvtColor(after.rgb, cv2.COLOR_RGB2BGR))
+        write_png(out / "rgb_moved.png", after.rgb)
         np.save(out / "labels_moved.npy", after.labels)
         print("[scene] ground-truth flow", flush=True)
         flow, valid, _ = gt_flow(before, after)
         np.save(out / "flow.npy", flow)
         np.save(out / "flow_valid.npy", valid)
-        write_image(out / "flow.png", colour_flow(flow, valid))
         mag = np.linalg.norm(flow[valid & (before.labels == args.hose)], axis=-1)
+        mm = float(max(np.linalg.norm(flow[valid], axis=-1).max(initial=0.0), 1e-6))
+        write_png(
+            out / "flow.png",
+            panel(
+                [with_flow_wheel(colour_flow(flow, mm, valid), mm)],
+                [f"ground-truth flow rgb.png -> rgb_moved.png (hose {args.hose} pulled)"],
+            ),
+        )
         meta = {
             "seed": cfg.seed,
             "config": to_dict(cfg),
@@ -211,8 +176,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_frame(out: Path, suffix: str, snap) -> None:
-    write_image(out / f"rgb{suffix}.png", cv2.cvtColor(snap.rgb, cv2.COLOR_RGB2BGR))
-    write_image(out / f"depth{suffix}.png", colour_depth(snap.image.depth))
+    write_png(out / f"rgb{suffix}.png", snap.rgb)
+    write_png(out / f"depth{suffix}.png", panel([depth_tile(snap.image.depth)], ["depth (m)"]))
     np.save(out / f"depth{suffix}.npy", snap.image.depth)
-    write_image(out / f"labels{suffix}.png", colour_labels(snap.labels))
+    labels = hstack([colour_labels(snap.labels), labels_legend(snap.labels, snap.labels.shape[0])])
+    write_png(out / f"labels{suffix}.png", panel([labels], ["labels"]))
     np.save(out / f"labels{suffix}.npy", snap.labels)

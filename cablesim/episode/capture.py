@@ -10,6 +10,11 @@ ground-truth flow *from the target frame to it* (``FrameTruth.flow_to_target``).
 Each finished frame goes to ``sink`` (e.g. a recording writer) as soon as it is complete: action
 frames at capture time (without flow), the target frame, then the flows.  Ticks may arrive on
 another thread (a real camera stream); the collector serialises them.
+
+With an ``arm_mask`` function (``(tick) -> HxW bool``, e.g.
+:meth:`cablesim.panda.arm_mask.ArmMasker.for_tick`: the arm model rendered at the tick's joint
+state through the calibrated camera) every kept frame carries ``Frame.arm_mask``, computed the
+same way for the simulated and the real robot.
 """
 
 from __future__ import annotations
@@ -26,6 +31,9 @@ from cablesim.episode.truth import FrameSink, TruthProvider
 from cablesim.perception.frames import TARGET_ACTION, Frame
 from cablesim.robot.pose import Pose
 
+#: ``(tick) -> HxW bool`` arm mask of the tick's joint state (see the module docstring)
+ArmMaskFunction = Callable[[Tick], np.ndarray]
+
 
 def pose_in_camera(T_world_camera: np.ndarray, pose: Pose) -> Pose:
     """A world pose in the camera frame."""
@@ -41,11 +49,13 @@ class FrameCollector:
         min_gripper_step: float = 0.001,
         truth: TruthProvider | None = None,
         sink: FrameSink | None = None,
+        arm_mask: ArmMaskFunction | None = None,
     ):
         self.T = np.asarray(T_world_camera, float)
         self.min_step = float(min_gripper_step)
         self.truth = truth
         self.sink = sink
+        self.arm_mask = arm_mask
         self.frames: list[Frame] = []
         self.action: int | None = None
         self._sample = 0
@@ -55,6 +65,7 @@ class FrameCollector:
         self.skews: list[float] = []
         self.render_time = 0.0
         self.truth_time = 0.0
+        self.mask_time = 0.0
 
     # ------------------------------------------------------------------ actions
     def begin_action(self, action: int) -> None:
@@ -83,7 +94,7 @@ class FrameCollector:
             image = tick.image()
             self.render_time += time.perf_counter() - t0
             self.skews.append(float(tick.skew))
-            self._emit(self._frame(image, tcp, tick.opening, self.action, self._sample, tick.time))
+            self._emit(self._frame(image, tcp, tick, self.action, self._sample))
             self._sample += 1
 
     # ------------------------------------------------------------------ target
@@ -93,7 +104,7 @@ class FrameCollector:
         image = grab()
         self.render_time += time.perf_counter() - t0
         tcp = pose_in_camera(self.T, tick.gripper)
-        frame = self._frame(image, tcp, tick.opening, TARGET_ACTION, 0, tick.time)
+        frame = self._frame(image, tcp, tick, TARGET_ACTION, 0)
         self._emit(frame)
         return frame
 
@@ -103,14 +114,17 @@ class FrameCollector:
             self.truth_time += self.truth.finish(self.frames, self.sink, say)
 
     # ------------------------------------------------------------------ internals
-    def _frame(
-        self, image: CameraImage, tcp: Pose, opening: float, action: int, sample: int, t: float
-    ) -> Frame:
+    def _frame(self, image: CameraImage, tcp: Pose, tick: Tick, action: int, sample: int) -> Frame:
         truth = None
         if self.truth is not None:
             t0 = time.perf_counter()
             truth = self.truth.frame_truth(image)
             self.render_time += time.perf_counter() - t0
+        mask = None
+        if self.arm_mask is not None:
+            t0 = time.perf_counter()
+            mask = np.asarray(self.arm_mask(tick), dtype=bool)
+            self.mask_time += time.perf_counter() - t0
         return Frame(
             rgb=image.rgb,
             depth=image.depth,
@@ -118,10 +132,11 @@ class FrameCollector:
             gripper=tcp.position,
             action=action,
             sample=sample,
-            timestamp=float(t),
+            timestamp=float(tick.time),
             gripper_quat=tcp.quaternion,
-            gripper_opening=float(opening),
+            gripper_opening=float(tick.opening),
             truth=truth,
+            arm_mask=mask,
         )
 
     def _emit(self, frame: Frame) -> None:

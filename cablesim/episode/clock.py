@@ -13,8 +13,13 @@ frames a clock delivers meanwhile.  A clock has four parts:
 (the gripper pose is read at the same physics step, skew 0) and waits by settling the physics.
 :class:`StreamClock` here serves real devices: the camera's own stream is read on a capture
 thread while franky moves the arm, a second thread samples the robot's state, and each frame is
-paired with the pose sample nearest its arrival time (the skew is recorded).  Stillness is
-judged from consecutive RGB and depth frames.
+paired with the pose sample nearest its arrival time (the skew is recorded) -- or, when the
+camera's timestamps tell when a frame was taken (``frame_time``), nearest that time: then the
+stream holds the frames *taken* inside the ``streaming`` block, also those that arrive a little
+after it (waiting at most ``drain`` s), and none taken before it.  The finger
+opening is read on a third thread: a franky gripper read blocks until the hand's next state
+packet (60 Hz on franka-sim), which would otherwise hold every pose sample back to that rate.
+Stillness is judged from consecutive RGB and depth frames.
 """
 
 from __future__ import annotations
@@ -82,6 +87,29 @@ class Clock(Protocol):
     def wait_still(self, cfg) -> StillResult: ...
 
 
+# ---------------------------------------------------------------------- planning
+class PlanningClock:
+    """The clock of a dry run: no frames while the (virtual) arm moves, nothing to wait for;
+    ``grab`` reads the camera."""
+
+    def __init__(self, camera: Camera) -> None:
+        self.camera = camera
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        return time.monotonic() - self._t0
+
+    def grab(self) -> CameraImage:
+        return self.camera.capture()
+
+    @contextlib.contextmanager
+    def streaming(self, on_tick: Callable[[Tick], None]) -> Iterator[None]:
+        yield
+
+    def wait_still(self, cfg) -> StillResult:
+        return StillResult(True, 0.0, 0.0, "dry run: nothing moved")
+
+
 # ---------------------------------------------------------------------- real devices
 @dataclass
 class _PoseSample:
@@ -127,10 +155,19 @@ class StreamClock:
 
     ``pose_rate``: how often the robot state is sampled (Hz).  The camera's ``capture()`` must
     block until its next frame (a RealSense does).  ``history``: seconds of pose samples kept.
+    ``frame_time``: when a frame was taken, on this clock (``time.monotonic()``), from its
+    image (e.g. from the camera's timestamps); None: when it arrived.  ``drain``: with
+    ``frame_time``, how long to wait after the block for the frames taken inside it.
     """
 
     def __init__(
-        self, robot: Robot, camera: Camera, pose_rate: float = 250.0, history: float = 10.0
+        self,
+        robot: Robot,
+        camera: Camera,
+        pose_rate: float = 250.0,
+        history: float = 10.0,
+        frame_time: Callable[[CameraImage], float] | None = None,
+        drain: float = 2.0,
     ) -> None:
         if not pose_rate > 0:
             raise InputError(f"pose_rate must be > 0, got {pose_rate}")
@@ -138,29 +175,55 @@ class StreamClock:
         self.camera = camera
         self.pose_period = 1.0 / float(pose_rate)
         self.history = float(history)
+        self.frame_time = frame_time
+        self.drain = float(drain)
         self.stats = StreamStats()
 
     def now(self) -> float:
         return time.monotonic()
 
     def grab(self) -> CameraImage:
-        return self.camera.capture()
+        """The next frame; with ``frame_time`` the first one taken after this call (waiting at
+        most ``drain`` s for it)."""
+        if self.frame_time is None:
+            return self.camera.capture()
+        t = self.now()
+        while True:
+            image = self.camera.capture()
+            if float(self.frame_time(image)) >= t or self.now() - t > self.drain:
+                return image
 
-    def _sample(self) -> _PoseSample:
+    def _sample(self, opening: float) -> _PoseSample:
+        """The arm's state now, timed at the middle of the reads."""
         r = self.robot
-        return _PoseSample(self.now(), r.ee_pose(), float(r.gripper_opening), r.joint_positions)
+        t0 = self.now()
+        pose, joints = r.ee_pose(), r.joint_positions
+        return _PoseSample(0.5 * (t0 + self.now()), pose, opening, joints)
 
     @contextlib.contextmanager
     def streaming(self, on_tick: Callable[[Tick], None]) -> Iterator[None]:
-        stop = threading.Event()
+        stop = threading.Event()  # the pose samplers
+        stop_frames = threading.Event()
+        begin, end = self.now(), [math.inf]
         lock = threading.Lock()
-        samples: list[_PoseSample] = [self._sample()]
+        opening = [float(self.robot.gripper_opening)]
+        samples: list[_PoseSample] = [self._sample(opening[0])]
         errors: list[BaseException] = []
+
+        def read_opening() -> None:
+            try:
+                while not stop.is_set():
+                    opening[0] = float(self.robot.gripper_opening)
+                    stop.wait(self.pose_period)
+            except BaseException as e:  # noqa: BLE001 - handed to the main thread
+                errors.append(e)
+                stop.set()
+                stop_frames.set()
 
         def sample_poses() -> None:
             try:
                 while not stop.is_set():
-                    s = self._sample()
+                    s = self._sample(opening[0])
                     with lock:
                         samples.append(s)
                         while samples and samples[0].time < s.time - self.history:
@@ -169,12 +232,17 @@ class StreamClock:
             except BaseException as e:  # noqa: BLE001 - handed to the main thread
                 errors.append(e)
                 stop.set()
+                stop_frames.set()
 
         def capture_frames() -> None:
             try:
-                while not stop.is_set():
+                while not stop_frames.is_set():
                     image = self.camera.capture()
-                    t = self.now()
+                    t = self.now() if self.frame_time is None else float(self.frame_time(image))
+                    if t < begin:  # taken before the block (arrived late)
+                        continue
+                    if t > end[0]:  # taken after the block: all frames of it are in
+                        break
                     with lock:
                         times = [s.time for s in samples]
                         i = bisect.bisect_left(times, t)
@@ -188,16 +256,23 @@ class StreamClock:
             except BaseException as e:  # noqa: BLE001 - handed to the main thread
                 errors.append(e)
                 stop.set()
+                stop_frames.set()
 
+        frames = threading.Thread(target=capture_frames, name="cablesim-frames", daemon=True)
         threads = [
             threading.Thread(target=sample_poses, name="cablesim-poses", daemon=True),
-            threading.Thread(target=capture_frames, name="cablesim-frames", daemon=True),
+            threading.Thread(target=read_opening, name="cablesim-gripper", daemon=True),
+            frames,
         ]
         for th in threads:
             th.start()
         try:
             yield
         finally:
+            end[0] = self.now()
+            if self.frame_time is not None and not errors:
+                frames.join(timeout=self.drain)  # the frames taken inside the block
+            stop_frames.set()
             stop.set()
             for th in threads:
                 th.join(timeout=5.0)
@@ -207,19 +282,21 @@ class StreamClock:
     def wait_still(self, cfg) -> StillResult:
         """Frames until ``cfg.still_time`` s of consecutive frames changed less than the
         thresholds of ``cfg`` (a :class:`~cablesim.episode.config.RetreatConfig`), or
-        ``cfg.settle_max_time`` s passed."""
+        ``cfg.settle_max_time`` s passed.  With ``frame_time`` only frames taken after the
+        call count, timed by when they were taken."""
         t0 = self.now()
-        prev = self.camera.capture()
+        prev = self.grab()  # with frame_time: taken after the call
         calm_since: float | None = None
         rgb = moved = math.inf
         while True:
             image = self.camera.capture()
             now = self.now()
+            taken = now if self.frame_time is None else float(self.frame_time(image))
             rgb, moved = frame_change(prev, image, cfg.still_depth)
             prev = image
             if rgb <= cfg.still_rgb and moved <= cfg.still_depth_fraction:
-                calm_since = now if calm_since is None else calm_since
-                if now - calm_since >= cfg.still_time:
+                calm_since = taken if calm_since is None else calm_since
+                if taken - calm_since >= cfg.still_time:
                     return StillResult(True, rgb, now - t0, _still_text(rgb, moved))
             else:
                 calm_since = None

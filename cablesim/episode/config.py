@@ -11,11 +11,9 @@ hose, perturbation) holds one of these; so does a real-robot exploration.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
 
-from cablesim.config import check_fields, check_positive, check_vector, from_dict, pretty, to_dict
+from cablesim.config import Config, check_fields, check_positive, check_vector
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
 
@@ -93,10 +91,19 @@ class CaptureConfig:
     frame_rate: float = 15.0  # frames per second of simulated time (RealSense rate)
     min_gripper_step: float = 0.001  # delta_g in metres; 0 keeps every frame
     ground_truth: bool = True  # labels and flow in FrameTruth (simulation only)
+    # the arm model rendered at each frame's joint state through the camera: Frame.arm_mask
+    # (on with the real robot; ~20 ms per 640x480 frame, so off by default in simulation)
+    arm_masks: bool = False
+    arm_mask_margin: int = 3  # pixels the arm mask is dilated by
 
     def validate(self) -> None:
         check_fields(self, "capture.")
         check_positive("capture.frame_rate", self.frame_rate)
+        if isinstance(self.arm_mask_margin, bool) or not isinstance(self.arm_mask_margin, int):
+            raise ConfigError(
+                "capture.arm_mask_margin", f"must be an integer, got {self.arm_mask_margin!r}"
+            )
+        check_positive("capture.arm_mask_margin", self.arm_mask_margin, allow_zero=True)
         check_positive("capture.min_gripper_step", self.min_gripper_step, allow_zero=True)
 
 
@@ -160,7 +167,7 @@ class RetreatConfig:
 
 
 @dataclass
-class InteractionConfig:
+class InteractionConfig(Config):
     """One interaction: grasp (or push), actions, capture, retreat."""
 
     kind: str = "grasp"  # "grasp" or "push"
@@ -180,16 +187,3 @@ class InteractionConfig:
         self.capture.validate()
         self.retreat.validate()
         return self
-
-    def replace(self, **changes: Any) -> InteractionConfig:
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return to_dict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> InteractionConfig:
-        return from_dict(cls, data)
-
-    def __str__(self) -> str:
-        return pretty(self)

@@ -32,7 +32,7 @@ import numpy as np
 
 from cablesim.camera.base import Camera
 from cablesim.episode import primitives as prim
-from cablesim.episode.capture import FrameCollector
+from cablesim.episode.capture import ArmMaskFunction, FrameCollector
 from cablesim.episode.clock import Clock, Tick
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.truth import FrameSink, TruthProvider
@@ -182,6 +182,7 @@ def run_interaction(
     say: Say | None = None,
     hose: int | None = None,
     park: Sequence[float] | None = None,
+    arm_mask: ArmMaskFunction | None = None,
 ) -> InteractionResult:
     """Grasp (or push) the hose at ``segment`` of the current image and act (module docstring).
 
@@ -189,7 +190,8 @@ def run_interaction(
     ``hose``: the hose's index when it is known without ground truth (recorded only).
     ``park``: the joint configuration out of view used when ``config.retreat.qpos`` is None.
     ``sink`` (e.g. :class:`~cablesim.recording.RecordingWriter`) gets every frame as soon as
-    it exists.
+    it exists.  ``arm_mask`` (``(tick) -> HxW bool``, e.g.
+    :meth:`cablesim.panda.arm_mask.ArmMasker.for_tick`) fills every frame's ``arm_mask``.
     """
     cfg = (config or InteractionConfig()).validate()
     say = say or quiet
@@ -238,7 +240,7 @@ def run_interaction(
     # 3. actions, frames from the clock
     if truth is not None:
         truth.begin_interaction(result.hose, g.pose)
-    collector = FrameCollector(T, cfg.capture.min_gripper_step, truth, sink)
+    collector = FrameCollector(T, cfg.capture.min_gripper_step, truth, sink, arm_mask)
     if cfg.kind == "grasp":
         directions = prim.action_directions(cfg.actions, axis, T, approach)
     else:

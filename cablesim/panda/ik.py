@@ -283,6 +283,57 @@ class ArmModel:
             reason = problem
         return False, reason, None
 
+    def plan_line(
+        self,
+        start: Pose,
+        q_start: np.ndarray,
+        target: Pose,
+        opening: float,
+        spacing: float = 0.005,
+        angle_step: float = 0.05,
+        max_joint_jump: float = 0.25,
+    ) -> tuple[list[np.ndarray], str]:
+        """Joint waypoints of the straight TCP line from ``start`` (at joints ``q_start``) to
+        ``target``: IK every ``spacing`` m / ``angle_step`` rad, each within limits, free of
+        collisions and without a branch jump.  ([q_start, ...], "") or ([], reason)."""
+        dist, angle = start.distance_to(target)
+        n = max(1, math.ceil(dist / spacing), math.ceil(angle / angle_step))
+        q = np.asarray(q_start, dtype=float)
+        plan = [q]
+        for i in range(1, n + 1):
+            s = i / n
+            r = self.solve(start.interpolate(target, s), q, q, opening)
+            where = f"at {100 * s:.0f}% of the line"
+            if not r.converged:
+                return [], (
+                    f"IK did not converge {where} (position error {r.position_error * 1000:.1f} mm)"
+                )
+            if np.max(np.abs(r.q - q)) > max_joint_jump:
+                return [], f"IK jumped between branches {where} (near a singularity or limit)"
+            problem = self.check(r.q, opening)
+            if problem:
+                return [], f"{problem} {where}"
+            q = r.q
+            plan.append(q)
+        return plan, ""
+
+    def check_joint_path(
+        self, q_start: np.ndarray, q_target: np.ndarray, opening: float, step: float = 0.05
+    ) -> str:
+        """Empty if the straight joint path is within limits and free of collisions (checked
+        every ``step`` rad), else the reason."""
+        q_target = np.asarray(q_target, dtype=float)
+        problem = self.limit_violation(q_target)
+        if problem:
+            return f"joint limit: {problem}"
+        q0 = np.asarray(q_start, dtype=float)
+        n = max(1, math.ceil(np.max(np.abs(q_target - q0)) / step))
+        for i in range(1, n + 1):
+            problem = self.check(q0 + (q_target - q0) * i / n, opening)
+            if problem:
+                return f"{problem} at {100 * i / n:.0f}% of the joint path"
+        return ""
+
     def check(self, q: np.ndarray, opening: float = 0.08) -> str:
         """Empty string if ``q`` is within limits and collision-free, else the reason."""
         reason = self.limit_violation(q)

@@ -1,8 +1,9 @@
 """A primitive-geometry model of the Franka Emika Panda, built with ``mujoco.MjSpec``.
 
 The kinematics, joint limits, masses and inertias are those of MuJoCo Menagerie's
-``franka_emika_panda/panda.xml``; the meshes are replaced by capsules, cylinders and boxes that
-follow each link's outline (no mesh package is available offline).  The hand has two real slide
+``franka_emika_panda/panda.xml``; the robot collides through capsules, cylinders and boxes that
+follow each link's outline, and is drawn either with those or with franka_ros's visual meshes
+(``visual="mesh"``, :mod:`cablesim.panda.visuals`).  The hand has two real slide
 joints coupled by a tendon and an equality, driven by one force-limited position actuator whose
 control is the opening width in metres (0 = closed, 0.08 = open) and whose force range is the
 grasp force per finger (70 N by default, like the real hand; change it at run time with
@@ -36,6 +37,7 @@ from cablesim.panda.description import (
     MAX_OPENING,
     TCP_OFFSET,
 )
+from cablesim.panda.visuals import add_mesh_visuals, check_visual
 
 _KP = (4500.0, 4500.0, 3500.0, 3500.0, 2000.0, 2000.0, 2000.0)
 _TORQUE = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
@@ -281,11 +283,14 @@ def _add_hand(link7: mujoco.MjsBody, p: str) -> None:
         )
 
 
-def panda_spec(prefix: str = "", home_key: bool = True) -> mujoco.MjSpec:
+def panda_spec(prefix: str = "", home_key: bool = True, visual: str = "primitive") -> mujoco.MjSpec:
     """The standalone Panda on the world body, base at the origin, at ``HOME_QPOS``.
 
     ``home_key`` adds a keyframe ``home`` (only meaningful while the spec holds only the arm).
+    ``visual="mesh"`` draws franka_ros's meshes instead of the primitives, which still collide
+    (:mod:`cablesim.panda.visuals`; the physics is the same bit for bit).
     """
+    check_visual(visual, "visual")
     p = prefix
     spec = mujoco.MjSpec()
     spec.modelname = "panda"
@@ -309,6 +314,8 @@ def panda_spec(prefix: str = "", home_key: bool = True) -> mujoco.MjSpec:
         parent = body
     _add_hand(parent, p)
     _add_actuators(spec, p)
+    if visual == "mesh":
+        add_mesh_visuals(spec, p)
     if home_key:
         key = spec.add_key(name="home")
         key.qpos = list(HOME_QPOS) + [FINGER_RANGE[1]] * 2
@@ -369,9 +376,11 @@ def attach_panda(
     pos: Sequence[float] = (0.0, 0.0, 0.0),
     quat: Sequence[float] = (1.0, 0.0, 0.0, 0.0),
     prefix: str = "panda/",
+    visual: str = "primitive",
 ) -> PandaNames:
-    """Attach a Panda to ``scene``'s world body at ``pos``/``quat`` (wxyz); names get ``prefix``."""
-    arm = panda_spec(home_key=False)
+    """Attach a Panda to ``scene``'s world body at ``pos``/``quat`` (wxyz); names get ``prefix``.
+    ``visual``: ``"primitive"`` or ``"mesh"`` (see :func:`panda_spec`)."""
+    arm = panda_spec(home_key=False, visual=visual)
     frame = scene.worldbody.add_frame(pos=list(pos), quat=list(quat))
     scene.attach(arm, prefix=prefix, frame=frame)
     return PandaNames.with_prefix(prefix)

@@ -5,7 +5,7 @@ Plain NumPy/OpenCV; torch is imported lazily by the RAFT back end only; MuJoCo n
 Typical use::
 
     from cablesim.perception import segment_stream, DISFlow, GraspSampler
-    seg = segment_stream(stream, method="correlation", flow=DISFlow())
+    seg = segment_stream(stream, method="correlation", flow=DISFlow())   # or "published", ...
     votes = seg.votes                       # actions supporting each target pixel
     res = GraspSampler(reachability=robot_check).propose(votes, target.depth, target.intrinsics)
 """
@@ -31,12 +31,7 @@ from cablesim.perception.flow import (
     make_flow,
     texture_mask,
 )
-from cablesim.perception.formats import (
-    read_flow_png,
-    read_sequence,
-    write_flow_png,
-    write_sequence,
-)
+from cablesim.perception.flow_region import FlowRegion, RegionFlow
 from cablesim.perception.frames import (
     LABEL_BACKGROUND,
     LABEL_ROBOT,
@@ -65,12 +60,17 @@ from cablesim.perception.metrics import (
     MaskScores,
     confusion,
     f_beta,
+    f_beta_counts,
     flow_epe,
     grade_proposal,
     mean_scores,
+    movingcables_frame,
+    movingcables_summary,
+    nanmean,
     score_mask,
 )
 from cablesim.perception.pipeline import (
+    CURRENT_METHODS,
     METHODS,
     StreamSegmentation,
     StreamStatistics,
@@ -79,6 +79,13 @@ from cablesim.perception.pipeline import (
     masks_from_statistics,
     segment_from_statistics,
     segment_stream,
+)
+from cablesim.perception.published import (
+    PUBLISHED_METHODS,
+    PUBLISHED_THRESHOLDS,
+    PublishedParams,
+    PublishedResult,
+    PublishedSegmentationResult,
 )
 from cablesim.perception.segmentation import (
     SegmentationAccumulator,
@@ -96,10 +103,13 @@ from cablesim.perception.votes import (
 
 __all__ = [
     "BETAS",
+    "CURRENT_METHODS",
     "GRADES",
     "LABEL_BACKGROUND",
     "LABEL_ROBOT",
     "METHODS",
+    "PUBLISHED_METHODS",
+    "PUBLISHED_THRESHOLDS",
     "TARGET_ACTION",
     "AblationParams",
     "Candidate",
@@ -109,6 +119,7 @@ __all__ = [
     "DISFlow",
     "FarnebackFlow",
     "FlowEstimator",
+    "FlowRegion",
     "Frame",
     "FrameTruth",
     "GateParams",
@@ -118,6 +129,10 @@ __all__ = [
     "Intrinsics",
     "MaskScores",
     "OracleFlow",
+    "PublishedParams",
+    "PublishedResult",
+    "PublishedSegmentationResult",
+    "RegionFlow",
     "SamplingResult",
     "SegmentPose",
     "SegmentationAccumulator",
@@ -133,6 +148,7 @@ __all__ = [
     "confusion",
     "eccentricity",
     "f_beta",
+    "f_beta_counts",
     "flow_epe",
     "geometric_median",
     "grade_proposal",
@@ -142,10 +158,11 @@ __all__ = [
     "make_flow",
     "masks_from_statistics",
     "mean_scores",
+    "movingcables_frame",
+    "movingcables_summary",
+    "nanmean",
     "merge_votes",
     "moments_to_result",
-    "read_flow_png",
-    "read_sequence",
     "score_mask",
     "segment_from_statistics",
     "segment_pose",
@@ -156,6 +173,4 @@ __all__ = [
     "tuning_table",
     "union",
     "vote_image",
-    "write_flow_png",
-    "write_sequence",
 ]

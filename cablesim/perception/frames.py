@@ -9,7 +9,9 @@ Conventions
 - camera frame: OpenCV (x right, y down, z forward), metres;
 - ``depth``: metric z-depth in metres, float32, 0 or NaN = invalid;
 - ``action``: 0, 1, ... for action frames, ``TARGET_ACTION`` (-1) for the target frame;
-- ``labels`` (truth): int16, hose index >= 0, ``LABEL_ROBOT`` (-2), ``LABEL_BACKGROUND`` (-1).
+- ``labels`` (truth): int16, hose index >= 0, ``LABEL_ROBOT`` (-2), ``LABEL_BACKGROUND`` (-1);
+- ``arm_mask`` (optional, not truth): HxW bool, the arm model rendered at the frame's joint
+  state through the calibrated camera; perception may use it (it does not by default).
 """
 
 from __future__ import annotations
@@ -167,6 +169,9 @@ class Frame:
     gripper_quat: np.ndarray | None = None  # (4,) wxyz, camera frame
     gripper_opening: float | None = None  # metres
     truth: FrameTruth | None = None
+    # HxW bool: the arm rendered from the joint state at this frame through the calibrated
+    # camera (cablesim.panda.arm_mask), the same in simulation and on the real robot; not truth
+    arm_mask: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         validate_rgbd(self.rgb, self.depth, self.intrinsics)
@@ -196,6 +201,13 @@ class Frame:
                 raise InputError(f"gripper_opening must be a number, got {v!r}")
         if self.truth is not None:
             check_truth(self.truth, self.rgb.shape[:2])
+        if self.arm_mask is not None:
+            m = np.asarray(self.arm_mask)
+            if m.shape != self.rgb.shape[:2]:
+                raise InputError(f"arm_mask must have shape {self.rgb.shape[:2]}, got {m.shape}")
+            if m.dtype != bool:
+                raise InputError(f"arm_mask must be a bool mask, got {m.dtype}")
+            self.arm_mask = m
 
     @property
     def is_target(self) -> bool:

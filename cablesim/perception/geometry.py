@@ -122,3 +122,38 @@ def eccentricity(mask: np.ndarray) -> float:
     if l1 <= 0:
         return 0.0
     return float(np.sqrt(max(0.0, 1.0 - max(l2, 0.0) / l1)))
+
+
+def line_segment_mask(
+    depth: np.ndarray,
+    intrinsics: Intrinsics,
+    u: float,
+    v: float,
+    angle: float,
+    length: float = 0.04,
+    thickness: int = 2,
+    min_pixels: int = 5,
+) -> np.ndarray | None:
+    """A short line of pixels through image point (``u``, ``v``) at ``angle`` radians from the
+    image x axis (y down), ``length`` metres long at the point's depth (median of the 5x5
+    neighbourhood), kept where depth is valid: how a person's click and drag becomes a segment.
+    None when there is no depth at the point or fewer than ``min_pixels`` remain."""
+    import cv2
+
+    depth = as_depth(depth)
+    h, w = depth.shape
+    if not (np.isfinite(u) and np.isfinite(v) and np.isfinite(angle)):
+        raise InputError(f"segment point and angle must be finite, got ({u}, {v}, {angle})")
+    ui, vi = min(max(int(u), 0), w - 1), min(max(int(v), 0), h - 1)
+    z = depth[max(vi - 2, 0) : vi + 3, max(ui - 2, 0) : ui + 3]
+    z = z[(z > 0) & np.isfinite(z)]
+    if z.size == 0:
+        return None
+    half = max(0.5 * length * intrinsics.f / float(np.median(z)), 3.0)
+    du, dv = half * np.cos(angle), half * np.sin(angle)
+    mask = np.zeros((h, w), np.uint8)
+    p0 = (int(round(ui - du)), int(round(vi - dv)))
+    p1 = (int(round(ui + du)), int(round(vi + dv)))
+    cv2.line(mask, p0, p1, 1, thickness=thickness)
+    out = mask.astype(bool) & valid_depth(depth)
+    return out if out.sum() >= min_pixels else None

@@ -8,8 +8,15 @@ while the accumulators consume the results in order (stage 2) through a bounded 
 in either stage propagate and the results are identical to the sequential path.
 
 :func:`segment_stream` turns the statistics into per-action masks and a vote image for one
-method (``"correlation"``, ``"segmentation"`` or ``"ablation"``);
-:func:`masks_from_statistics` re-thresholds cached statistics cheaply (tuning).
+method (``"correlation"``, ``"segmentation"`` or ``"ablation"``, or the published code's
+``"published"``, ``"published-segmentation"`` and ``"published-ablation"`` of
+:mod:`cablesim.perception.published`, which keep frames by their own rules; when both kinds
+are asked for, each frame's flow is computed once); :func:`masks_from_statistics`
+re-thresholds cached statistics cheaply (tuning).
+
+``region`` is where flow is computed (:mod:`cablesim.perception.flow_region`); the default
+``"auto"`` takes the crop and scale a stream read from the published layout carries in its
+meta (``crop_origin``, ``crop_size``, ``scale_factor``), else the full image.
 """
 
 from __future__ import annotations
@@ -35,7 +42,19 @@ from cablesim.perception.correlation import (
     CorrelationResult,
 )
 from cablesim.perception.flow import FlowEstimator, make_flow
+from cablesim.perception.flow_region import FlowRegion, with_region
 from cablesim.perception.frames import Frame, Stream
+from cablesim.perception.published import (
+    PUBLISHED_METHODS,
+    PUBLISHED_THRESHOLDS,
+    PublishedAccumulator,
+    PublishedParams,
+    PublishedResult,
+    PublishedSegmentationResult,
+    metric_scale,
+    plan_published,
+)
+from cablesim.perception.published import describe as describe_published
 from cablesim.perception.segmentation import (
     SegmentationAccumulator,
     SegmentationParams,
@@ -43,8 +62,16 @@ from cablesim.perception.segmentation import (
 )
 from cablesim.perception.votes import merge_votes, vote_image
 
-Method = Literal["correlation", "segmentation", "ablation"]
-METHODS: tuple[str, ...] = ("correlation", "segmentation", "ablation")
+Method = Literal[
+    "correlation",
+    "segmentation",
+    "ablation",
+    "published",
+    "published-segmentation",
+    "published-ablation",
+]
+CURRENT_METHODS: tuple[str, ...] = ("correlation", "segmentation", "ablation")
+METHODS: tuple[str, ...] = CURRENT_METHODS + PUBLISHED_METHODS
 
 
 @dataclass
@@ -69,6 +96,9 @@ class StreamStatistics:
     segmentation: dict[int, SegmentationResult] = field(default_factory=dict)
     directions: dict[int, np.ndarray] = field(default_factory=dict)
     flow: dict[str, Any] = field(default_factory=dict)
+    published: dict[int, PublishedResult] = field(default_factory=dict)
+    published_segmentation: dict[int, PublishedSegmentationResult] = field(default_factory=dict)
+    published_meta: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -168,16 +198,26 @@ def iter_flows(
     return _flows_sequential(jobs, est, target)
 
 
+def _resolve_region(stream: Stream, region: FlowRegion | str | None) -> FlowRegion | None:
+    if region == "auto":
+        return FlowRegion.from_meta(stream.meta)
+    if region is None or isinstance(region, FlowRegion):
+        return region
+    raise InputError(f"region must be a FlowRegion, 'auto' or None, got {region!r}")
+
+
 def compute_statistics(
     stream: Stream,
     flow: FlowEstimator | str = "dis",
-    methods: Sequence[str] = METHODS,
+    methods: Sequence[str] = CURRENT_METHODS,
     correlation: CorrelationParams | AblationParams | None = None,
     segmentation: SegmentationParams | None = None,
     delta_g: float = 0.001,
     pipelined: bool = True,
     queue_size: int = 4,
     dtype: type = np.float32,
+    published: PublishedParams | None = None,
+    region: FlowRegion | str | None = "auto",
 ) -> StreamStatistics:
     """One pass over the stream feeding the accumulators the ``methods`` need."""
     if isinstance(stream, Sequence) and not isinstance(stream, Stream):
@@ -193,18 +233,23 @@ def compute_statistics(
             tau_n=cparams.tau_n, depth_mode=cparams.depth_mode, min_samples=cparams.min_samples
         )
     sparams = segmentation if segmentation is not None else SegmentationParams()
+    pparams = published if published is not None else PublishedParams()
     want_corr = "correlation" in methods or "ablation" in methods
     want_seg = "segmentation" in methods
+    want_pub_corr = "published" in methods or "published-ablation" in methods
+    want_pub_seg = "published-segmentation" in methods
+    want_pub = want_pub_corr or want_pub_seg
     target = stream.target
     shape = target.shape
     focal = target.intrinsics.f
-    est = make_flow(flow)
+    est = with_region(make_flow(flow), _resolve_region(stream, region))
     if not stream.actions:
         raise InputError("the stream has no action frames")
     corr: dict[int, CorrelationAccumulator] = {}
     seg: dict[int, SegmentationAccumulator] = {}
     counts: dict[int, int] = {}
-    for job, phi in iter_flows(stream, est, delta_g, pipelined, queue_size):
+
+    def feed_current(job: Job, phi: np.ndarray) -> None:
         a = job.action
         if want_corr:
             if a not in corr:
@@ -215,7 +260,38 @@ def compute_statistics(
                 seg[a] = SegmentationAccumulator(shape, sparams)
             seg[a].update(phi)
         counts[a] = counts.get(a, 0) + 1
-    actions = sorted(counts)
+
+    pub_meta: dict[str, Any] = {}
+    pub_acc: PublishedAccumulator | None = None
+    if not want_pub:
+        for job, phi in iter_flows(stream, est, delta_g, pipelined, queue_size):
+            feed_current(job, phi)
+    else:
+        z, f, mdtype = metric_scale(stream, pparams)
+        pub_meta = describe_published(pparams, z, f)
+        pub_acc = PublishedAccumulator(shape, z / f, pparams, want_pub_corr, want_pub_seg, mdtype)
+        index_of = {id(fr): i for i, fr in enumerate(stream.frames)}
+        want_current = want_corr or want_seg
+        cur = {index_of[id(j.frame)]: j for j in plan_jobs(stream, delta_g)} if want_current else {}
+        pub = {j.frame_index: j for j in plan_published(stream, pparams.min_gripper_diff)}
+        if not pub:
+            raise InputError("the stream has no frame with a non-negative action code")
+        units = [Job(-1, i, stream.frames[i], 0.0, 0.0) for i in sorted(set(cur) | set(pub))]
+        flows = (
+            _flows_pipelined(units, est, target, queue_size)
+            if pipelined
+            else _flows_sequential(units, est, target)
+        )
+        for unit, phi in flows:
+            if unit.index in cur:
+                feed_current(cur[unit.index], phi)
+            if unit.index in pub:
+                pub_acc.update(pub[unit.index], phi)
+    pub_corr, pub_seg = pub_acc.results() if pub_acc is not None else ({}, {})
+    actions = sorted(counts) if counts else sorted(set(pub_corr) | set(pub_seg))
+    if not counts:
+        src = pub_corr or pub_seg
+        counts = {a: r.n_samples for a, r in src.items()}
     return StreamStatistics(
         shape=shape,
         actions=actions,
@@ -224,13 +300,16 @@ def compute_statistics(
         segmentation={a: acc.result() for a, acc in seg.items()},
         directions={a: action_direction(stream.action_frames(a)) for a in actions},
         flow=est.describe(),
+        published=pub_corr,
+        published_segmentation=pub_seg,
+        published_meta=pub_meta,
     )
 
 
 def masks_from_statistics(
     stats: StreamStatistics,
     method: str,
-    params: CorrelationParams | SegmentationParams | AblationParams | None = None,
+    params: CorrelationParams | SegmentationParams | AblationParams | PublishedParams | None = None,
 ) -> dict[int, np.ndarray]:
     """Per-action masks of ``method`` from cached statistics."""
     if method == "correlation":
@@ -256,6 +335,19 @@ def masks_from_statistics(
         if not stats.segmentation:
             raise InputError("statistics were computed without the segmentation method")
         return {a: stats.segmentation[a].mask(p.tau_v) for a in stats.actions}
+    if method in PUBLISHED_METHODS:
+        p = params if params is not None else PublishedParams()
+        if not isinstance(p, PublishedParams):
+            raise InputError(f"method {method!r} needs PublishedParams")
+        if method == "published-segmentation":
+            if not stats.published_segmentation:
+                raise InputError("statistics were computed without published-segmentation")
+            return {a: r.mask(p.vote) for a, r in stats.published_segmentation.items()}
+        if not stats.published:
+            raise InputError(f"statistics were computed without the {method!r} method")
+        if method == "published":
+            return {a: r.mask(p.r2, p.c0) for a, r in stats.published.items()}
+        return {a: r.ablation_mask(p.std) for a, r in stats.published.items()}
     raise InputError(f"unknown method {method!r}; choose from {METHODS}")
 
 
@@ -268,6 +360,10 @@ def segment_from_statistics(
     if method in ("correlation", "ablation"):
         out.c0 = {a: r.c0 for a, r in stats.correlation.items()}
         out.r2 = {a: r.r2 for a, r in stats.correlation.items()}
+    elif method in ("published", "published-ablation"):
+        f32 = np.float32
+        out.c0 = {a: np.nan_to_num(r.c0).astype(f32) for a, r in stats.published.items()}
+        out.r2 = {a: np.nan_to_num(r.r2).astype(f32) for a, r in stats.published.items()}
     return out
 
 
@@ -275,19 +371,25 @@ def segment_stream(
     stream: Stream,
     method: str = "correlation",
     flow: FlowEstimator | str = "dis",
-    params: CorrelationParams | SegmentationParams | AblationParams | None = None,
+    params: CorrelationParams | SegmentationParams | AblationParams | PublishedParams | None = None,
     delta_g: float = 0.001,
     pipelined: bool = True,
     queue_size: int = 4,
+    region: FlowRegion | str | None = "auto",
 ) -> StreamSegmentation:
     """Segment the grasped hose in the target frame of ``stream`` with one method.
 
-    Returns per-action masks, their vote image, and (correlation/ablation) the c0 and R^2 maps.
+    Returns per-action masks, their vote image, and (correlation, ablation and the published
+    correlation) the c0 and R^2 maps.
     """
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose from {METHODS}")
-    kw: dict[str, Any] = {}
-    if method == "segmentation":
+    kw: dict[str, Any] = {"region": region}
+    if method in PUBLISHED_METHODS:
+        if params is not None and not isinstance(params, PublishedParams):
+            raise InputError(f"method {method!r} needs PublishedParams")
+        kw["published"] = params
+    elif method == "segmentation":
         if params is not None and not isinstance(params, SegmentationParams):
             raise InputError("method 'segmentation' needs SegmentationParams")
         kw["segmentation"] = params
@@ -305,3 +407,24 @@ def segment_stream(
         **kw,
     )
     return segment_from_statistics(stats, method, params)
+
+
+def params_for_beta(
+    method: str, beta: float = 0.4
+) -> CorrelationParams | SegmentationParams | AblationParams | PublishedParams:
+    """The thresholds of SPEC sections 7-8 for ``method`` at ``beta`` (1, 0.5, 0.4, 0.3, 0.2,
+    0.1): the published table for every method (R^2, |c0| and vote share as fractions for
+    cablesim's own correlation and segmentation); cablesim's ablation, whose statistic differs
+    from the published one, keeps its default threshold."""
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose from {METHODS}")
+    if beta not in PUBLISHED_THRESHOLDS:
+        raise InputError(f"beta must be one of {sorted(PUBLISHED_THRESHOLDS)}, got {beta!r}")
+    r2, c0, vote, _ = PUBLISHED_THRESHOLDS[beta]
+    if method in PUBLISHED_METHODS:
+        return PublishedParams(beta=beta)
+    if method == "correlation":
+        return CorrelationParams(c0_min=c0 / 100, r2_min=r2 / 100)
+    if method == "segmentation":
+        return SegmentationParams(tau_v=vote / 100)
+    return AblationParams()

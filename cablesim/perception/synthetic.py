@@ -8,6 +8,8 @@ prescribed per region as a function of the gripper displacement:
 - ``"random"`` regions move by random amounts of similar size;
 - ``"lag"`` regions follow the gripper with a phase lag;
 - ``"oneoff"`` regions jump once and stay;
+- ``"oneside"`` regions move as ``gain * d_g`` only while d_g > 0 (a neighbour the grasped hose
+  pushes one way and leaves behind the other way) and rest otherwise;
 - everything else gets Gaussian flow noise of ``noise_px`` standard deviation.
 
 Images are random textures (warped consistently is not attempted: use the oracle flow).
@@ -34,7 +36,7 @@ class Region:
     """A rectangle (y0, y1, x0, x1) with a motion model."""
 
     box: tuple[int, int, int, int]
-    kind: str = "linear"  # linear | random | lag | oneoff | static
+    kind: str = "linear"  # linear | random | lag | oneoff | oneside | static
     gain: float = 1.0  # metres of surface motion per metre of gripper motion
     direction: tuple[float, float] | None = None  # image direction; None = action's
     label: int = LABEL_BACKGROUND
@@ -103,6 +105,8 @@ def synthetic_stream(regions: list[Region], spec: SyntheticSpec | None = None) -
                     mag = r.gain * lagged[k]
                 elif r.kind == "oneoff":
                     mag = r.gain * spec.amplitude * (k >= len(profile) // 2)
+                elif r.kind == "oneside":
+                    mag = r.gain * max(d, 0.0)
                 elif r.kind == "static":
                     mag = 0.0
                 else:

@@ -10,7 +10,9 @@ confusion counts for all thresholds t of a grid follow from one sort per sequenc
   t = R2_min.
 
 (n = action threshold of the vote merge; 1 = union.)  The thresholds maximising the mean
-F_beta over sequences are chosen per beta.
+F_beta over sequences are chosen per beta.  Scores follow :func:`~cablesim.perception.metrics.
+score_mask` (NaN where undefined, e.g. the precision of an empty prediction) and means leave
+the NaNs out, as the published evaluation does.
 """
 
 from __future__ import annotations
@@ -56,19 +58,38 @@ def _counts_for_thresholds(
 
 
 def _prf(tp: np.ndarray, fp: np.ndarray, npos: int) -> tuple[np.ndarray, ...]:
+    """Precision, recall, IoU per threshold; NaN where undefined (as :func:`score_mask`)."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        p = np.where(tp + fp > 0, tp / (tp + fp), 0.0)
-        r = np.where(npos > 0, tp / max(npos, 1), 0.0)
-        iou = np.where(npos + fp > 0, tp / (npos + fp), 0.0)
+        p = np.where(tp + fp > 0, tp / (tp + fp), np.nan)
+        r = np.where(npos > 0, tp / max(npos, 1), np.nan)
+        iou = np.where(npos + fp > 0, tp / (npos + fp), np.nan)
     return p, r, iou
 
 
-def _f_beta_vec(p: np.ndarray, r: np.ndarray, beta: float) -> np.ndarray:
+def _f_beta_counts(tp: np.ndarray, fp: np.ndarray, npos: int, beta: float) -> np.ndarray:
     f_beta(0.5, 0.5, beta)  # validates beta
     b2 = beta * beta
-    den = b2 * p + r
+    den = (1 + b2) * tp + b2 * (npos - tp) + fp
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den > 0, (1 + b2) * p * r / den, 0.0)
+        return np.where(den > 0, (1 + b2) * tp / den, np.nan)
+
+
+class _NanMean:
+    """Running sum and count of the finite values of same-shape arrays."""
+
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        self.sum = np.zeros(shape)
+        self.count = np.zeros(shape)
+
+    def add(self, i: int, v: np.ndarray) -> None:
+        ok = ~np.isnan(v)
+        self.sum[i] += np.where(ok, v, 0.0)
+        self.count[i] += ok
+
+    @property
+    def mean(self) -> np.ndarray:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.count > 0, self.sum / np.maximum(self.count, 1), np.nan)
 
 
 @dataclass
@@ -147,29 +168,34 @@ def tune_thresholds(
         outer = np.array([np.nan])
         inner_name = "tau_v" if method == "segmentation" else "std_min"
         inner = np.asarray(grid[inner_name], float)
-    P = np.zeros((len(outer), len(inner)))
-    R = np.zeros_like(P)
-    J = np.zeros_like(P)
-    Fs = {b: np.zeros_like(P) for b in betas}
+    shape = (len(outer), len(inner))
+    P, R, J = _NanMean(shape), _NanMean(shape), _NanMean(shape)
+    Fs = {b: _NanMean(shape) for b in betas}
     for s, t in zip(stats, masks, strict=True):
         for i, c in enumerate(outer):
             score = _scores_for(s, method, n, None if np.isnan(c) else c)
             tp, fp, npos = _counts_for_thresholds(score, t, inner)
             p, r, j = _prf(tp, fp, npos)
-            P[i] += p
-            R[i] += r
-            J[i] += j
+            P.add(i, p)
+            R.add(i, r)
+            J.add(i, j)
             for b in betas:
-                Fs[b][i] += _f_beta_vec(p, r, b)
-    k = len(stats)
+                Fs[b].add(i, _f_beta_counts(tp, fp, npos, b))
     res = TuningResult(method, n)
     for b in betas:
-        i, j = np.unravel_index(np.argmax(Fs[b]), Fs[b].shape)
+        fb = np.nan_to_num(Fs[b].mean, nan=-1.0)
+        i, j = np.unravel_index(np.argmax(fb), fb.shape)
         params = {inner_name: float(inner[j])}
         if method == "correlation":
             params["c0_min"] = float(outer[i])
         res.rows[b] = TuningRow(
-            method, b, params, P[i, j] / k, R[i, j] / k, Fs[b][i, j] / k, J[i, j] / k
+            method,
+            b,
+            params,
+            float(P.mean[i, j]),
+            float(R.mean[i, j]),
+            float(Fs[b].mean[i, j]),
+            float(J.mean[i, j]),
         )
     return res
 

@@ -120,6 +120,9 @@ class Robot(abc.ABC):
     def recover(self) -> None:  # noqa: B027 - optional hook, nothing to do in simulation
         """Clear reflex errors after a collision (real robot)."""
 
+    def stop(self) -> None:  # noqa: B027 - optional hook: simulated motions block
+        """Stop any motion now (Ctrl-C on the real robot); the robot stays usable."""
+
     # ---- frames ------------------------------------------------------------------------------
     def world_to_camera(self, pose: Pose) -> Pose:
         T_camera_world = np.linalg.inv(np.asarray(self.T_world_camera, dtype=float))

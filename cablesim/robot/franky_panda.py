@@ -179,27 +179,16 @@ class FrankyPanda(ArmModelChecks, Robot):
     def check_line(self, target: Pose) -> str:
         """Empty if IK follows the straight TCP line to ``target`` within limits, free of
         collisions and without branch jumps (from the current joints); else the reason."""
-        start = self.ee_pose()
-        dist, angle = start.distance_to(target)
-        n = max(1, math.ceil(dist / self.waypoint_spacing), math.ceil(angle / 0.1))
-        q = self.joint_positions
-        opening = self._opening_for_checks()
-        for i in range(1, n + 1):
-            s = i / n
-            r = self.arm.solve(start.interpolate(target, s), q, q, opening)
-            where = f"at {100 * s:.0f}% of the line"
-            if not r.converged:
-                return (
-                    f"unreachable: IK did not converge {where} "
-                    f"(position error {r.position_error * 1000:.1f} mm)"
-                )
-            if np.max(np.abs(r.q - q)) > self.max_joint_jump:
-                return f"unreachable: IK jumped between branches {where}"
-            problem = self.arm.check(r.q, opening)
-            if problem:
-                return f"{problem} {where}"
-            q = r.q
-        return ""
+        _, problem = self.arm.plan_line(
+            self.ee_pose(),
+            self.joint_positions,
+            target,
+            self._opening_for_checks(),
+            self.waypoint_spacing,
+            0.1,
+            self.max_joint_jump,
+        )
+        return f"unreachable: {problem}" if problem.startswith("IK") else problem
 
     # ---- motion ------------------------------------------------------------------------------
     def _cartesian_factor(self, speed: float, angular_speed: float) -> Any:
@@ -272,13 +261,9 @@ class FrankyPanda(ArmModelChecks, Robot):
         if problem:
             return MoveResult(False, f"joint limit: {problem}")
         if check:
-            q0 = self.joint_positions
-            n = max(1, math.ceil(np.max(np.abs(q - q0)) / 0.05))
-            opening = self._opening_for_checks()
-            for i in range(1, n + 1):
-                problem = self.arm.check(q0 + (q - q0) * i / n, opening)
-                if problem:
-                    return MoveResult(False, f"{problem} at {100 * i / n:.0f}% of the joint path")
+            problem = self.arm.check_joint_path(self.joint_positions, q, self._opening_for_checks())
+            if problem:
+                return MoveResult(False, problem)
         fr = self._franky
         factor = fr.RelativeDynamicsFactor(
             min(speed_factor, 1.0), self.dynamics_factor, self.dynamics_factor
@@ -339,6 +324,11 @@ class FrankyPanda(ArmModelChecks, Robot):
                 duration,
             )
         return MoveResult(True, "", pos_err, duration)
+
+    def stop(self) -> None:
+        """Stop the motion in progress (franky's ``stop``) and recover from errors."""
+        if self.robot is not None:
+            self._stop()
 
     def _stop(self) -> None:
         fr = self._franky

@@ -7,23 +7,20 @@ z up.  The board's front face is the plane x = ``board.x``; connectors stick out
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 from cablesim.config import (
+    Config,
     check_fields,
     check_number,
     check_positive,
     check_range,
     check_vector,
-    from_dict,
-    pretty,
-    to_dict,
 )
 from cablesim.errors import ConfigError
 from cablesim.panda.description import JOINT_LIMITS, PARK_QPOS
+from cablesim.panda.visuals import check_visual
 
 BACKGROUNDS = ("wood", "bushes", "cables", "solid")
 
@@ -247,6 +244,15 @@ class RobotConfig:
     # where the arm waits: away from the hoses and out of the default camera's view (the scene
     # starts and settles with the arm here; ``SimPanda`` retreats here before a target frame)
     park_qpos: tuple[float, ...] = PARK_QPOS
+    # a ChArUco board (cablesim.calibration.BoardSpec's default, at its nominal mount) welded
+    # to the hand, visual only: the simulated set-up of ``cablesim calibrate``
+    hand_board: bool = False
+    # how the arm is drawn: "primitive" (the capsules and boxes it collides with) or "mesh"
+    # (franka_ros's visual meshes); it collides through the primitives either way, so the
+    # physics is the same bit for bit (cablesim.panda.visuals).  The meshed shoulder is wider:
+    # at this base position it shows at the right edge of the default camera in every park
+    # pose, so "mesh" adds a static robot strip to every frame (~950 px at 640x480)
+    visual: str = "primitive"
 
     def validate(self) -> None:
         check_fields(self, "robot.")
@@ -257,6 +263,11 @@ class RobotConfig:
             raise ConfigError("robot.park_qpos", f"expected 7 joint angles, got {self.park_qpos}")
         for i, (q, (lo, hi)) in enumerate(zip(self.park_qpos, JOINT_LIMITS, strict=True)):
             check_number(f"robot.park_qpos[{i}]", q, float(lo), float(hi))
+        if not isinstance(self.hand_board, bool):
+            raise ConfigError("robot.hand_board", f"must be true or false, got {self.hand_board!r}")
+        if self.hand_board and not self.enabled:
+            raise ConfigError("robot.hand_board", "a board in the hand needs the robot (enabled)")
+        check_visual(self.visual, "robot.visual")
 
 
 @dataclass
@@ -280,7 +291,7 @@ class PhysicsConfig:
 
 
 @dataclass
-class SceneConfig:
+class SceneConfig(Config):
     """Everything that defines a scene; ``seed`` draws the random parts."""
 
     seed: int = 0
@@ -306,16 +317,3 @@ class SceneConfig:
                 f"the board has {len(self.board.connectors)}",
             )
         return self
-
-    def replace(self, **changes: Any) -> SceneConfig:
-        return dataclasses.replace(self, **changes)
-
-    def to_dict(self) -> dict[str, Any]:
-        return to_dict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> SceneConfig:
-        return from_dict(cls, data)
-
-    def __str__(self) -> str:
-        return pretty(self)

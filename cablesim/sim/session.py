@@ -25,9 +25,10 @@ from pathlib import Path
 from typing import Any
 
 from cablesim.camera.base import CameraImage
-from cablesim.config import check_fields, from_dict, pretty, to_dict
+from cablesim.config import Config, check_fields
 from cablesim.episode.config import InteractionConfig
-from cablesim.episode.runner import InteractionResult, run_interaction
+from cablesim.episode.runner import InteractionResult
+from cablesim.episode.session import Session
 from cablesim.errors import ConfigError
 from cablesim.progress import Progress, Say, quiet
 from cablesim.seeding import stream
@@ -36,7 +37,7 @@ from cablesim.sim.perturb import PerturbConfig
 
 
 @dataclass
-class EpisodeConfig:
+class EpisodeConfig(Config):
     """A simulated interaction: the seed (scene and episode), the hose of interest, the scene,
     the interaction and the optional perturbation of the other hoses."""
 
@@ -66,21 +67,8 @@ class EpisodeConfig:
         """The scene, with ``seed`` as its seed."""
         return dataclasses.replace(self.scene, seed=self.seed)
 
-    def replace(self, **changes: Any) -> EpisodeConfig:
-        return dataclasses.replace(self, **changes)
 
-    def to_dict(self) -> dict[str, Any]:
-        return to_dict(self)
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> EpisodeConfig:
-        return from_dict(cls, data)
-
-    def __str__(self) -> str:
-        return pretty(self)
-
-
-class SimSession:
+class SimSession(Session):
     """See the module docstring.  ``world`` and ``camera`` may be reused from an earlier
     session of the same scene (the world is reset to its settled state)."""
 
@@ -119,10 +107,6 @@ class SimSession:
 
     # ------------------------------------------------------------------ parts
     @property
-    def T_world_camera(self) -> Any:
-        return self.camera.T_world_camera
-
-    @property
     def park(self) -> tuple[float, ...]:
         return tuple(self.world.cfg.robot.park_qpos)
 
@@ -144,44 +128,11 @@ class SimSession:
         icfg = interaction or self.cfg.interaction
         return pick_segment(self.world, self.robot, self.camera, hose, self.rng, icfg)
 
-    def capture(self) -> CameraImage:
-        return self.camera.capture()
-
     def evaluator(self):
         """Ground truth for scores and grades of the hose of interest (evaluation only)."""
         from cablesim.evaluation import Evaluator
 
         return Evaluator(self.truth, self.draw_hose())
-
-    def interact(
-        self,
-        segment: Any,
-        interaction: InteractionConfig | None = None,
-        sink: Any = None,
-        say: Say | None = None,
-    ) -> InteractionResult:
-        """One interaction at ``segment`` of the current image (see ``run_interaction``)."""
-        return run_interaction(
-            self.robot,
-            self.camera,
-            self.clock,
-            segment,
-            interaction or self.cfg.interaction,
-            truth=self.truth,
-            sink=sink,
-            say=say,
-            hose=self.hose,
-            park=self.park,
-        )
-
-    def close(self) -> None:
-        self.camera.close()
-
-    def __enter__(self) -> SimSession:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 @dataclass

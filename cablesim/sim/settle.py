@@ -52,6 +52,7 @@ def _source_digest() -> str:
 def cache_key(world: World) -> str:
     cfg = to_dict(world.cfg)
     cfg.pop("camera")  # the camera does not touch the physics
+    cfg["robot"].pop("visual")  # nor does the arm's look (visual-only geoms, same physics)
     cfg["physics"].pop("cache")
     blob = json.dumps(
         {

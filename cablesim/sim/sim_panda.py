@@ -155,28 +155,15 @@ class SimPanda(ArmModelChecks, Robot):
     def plan_line(self, target: Pose) -> tuple[list[np.ndarray], str]:
         """Joint waypoints along the straight TCP line to ``target``; empty list + reason on failure."""
         cfg = self.config
-        start = self.ee_pose()
-        dist, angle = start.distance_to(target)
-        n = max(1, math.ceil(dist / cfg.waypoint_spacing), math.ceil(angle / cfg.waypoint_angle))
-        q = self.joint_positions
-        opening = self.gripper_opening
-        plan = [q]
-        for i in range(1, n + 1):
-            s = i / n
-            r = self.arm.solve(start.interpolate(target, s), q, q, opening)
-            where = f"at {100 * s:.0f}% of the line"
-            if not r.converged:
-                return [], (
-                    f"IK did not converge {where} (position error {r.position_error * 1000:.1f} mm)"
-                )
-            if np.max(np.abs(r.q - q)) > cfg.max_joint_jump:
-                return [], f"IK jumped between branches {where} (near a singularity or limit)"
-            problem = self.arm.check(r.q, opening)
-            if problem:
-                return [], f"{problem} {where}"
-            q = r.q
-            plan.append(q)
-        return plan, ""
+        return self.arm.plan_line(
+            self.ee_pose(),
+            self.joint_positions,
+            target,
+            self.gripper_opening,
+            cfg.waypoint_spacing,
+            cfg.waypoint_angle,
+            cfg.max_joint_jump,
+        )
 
     # ---- motion ------------------------------------------------------------------------------
     def move_to(self, pose: Pose, speed: float = 0.1, angular_speed: float = 0.8) -> MoveResult:
@@ -194,16 +181,12 @@ class SimPanda(ArmModelChecks, Robot):
         q = np.asarray(q, dtype=float).reshape(7)
         if not 0 < speed_factor <= 1:
             return MoveResult(False, f"speed_factor must be in (0, 1], got {speed_factor}")
-        problem = self.arm.limit_violation(q)
-        if problem:
-            return MoveResult(False, f"joint limit: {problem}")
         q0 = self.joint_positions
+        problem = self.arm.check_joint_path(q0, q, self.gripper_opening)
+        if problem:
+            return MoveResult(False, problem)
         n = max(1, math.ceil(np.max(np.abs(q - q0)) / 0.05))
         plan = [q0 + (q - q0) * i / n for i in range(n + 1)]
-        for i, qi in enumerate(plan[1:], 1):
-            problem = self.arm.check(qi, self.gripper_opening)
-            if problem:
-                return MoveResult(False, f"{problem} at {100 * i / n:.0f}% of the joint path")
         duration = max(
             1.875 * float(np.max(np.abs(q - q0) / (JOINT_VELOCITY_LIMITS * speed_factor))), 0.02
         )

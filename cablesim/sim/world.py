@@ -243,8 +243,16 @@ class World:
                 spec, pos=tuple(cfg.robot.base_position), quat=quat, prefix="panda/"
             )
             panda_base = (np.array(cfg.robot.base_position, float), np.array(quat))
+            if cfg.robot.hand_board:
+                from cablesim.sim.hand_board import add_hand_board
+
+                add_hand_board(spec, panda)
         try:
             model = spec.compile()
+            if panda is not None and cfg.robot.visual == "mesh":
+                from cablesim.panda.visuals import add_mesh_visuals_same_view
+
+                model = add_mesh_visuals_same_view(spec, model, prefix="panda/")
         except Exception as e:  # pragma: no cover - names the failing part for the user
             raise PhysicsDivergedError(f"the scene failed to compile: {e}") from e
         hoses = []

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from cablesim.errors import InputError
-from cablesim.perception import score_mask, write_flow_png
+from cablesim.formats.movingcables import write_flow_png
+from cablesim.perception import score_mask
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.flow import DISFlow, FarnebackFlow
 from cablesim.perception.frames import Frame, Intrinsics, Stream

@@ -43,10 +43,19 @@ def test_hand_worked_scores():
     # F_0.5 = 1.25 * (1/3) / (0.25*2/3 + 0.5) = (5/12) / (2/3) = 0.625
     assert s.f[0.5] == pytest.approx(0.625)
     assert f_beta(0.0, 0.0, 0.4) == 0.0
+    # as published: an empty prediction has no precision; F and IoU are 0 (the truth is missed)
     empty = score_mask(np.zeros((4, 4), bool), truth)
-    assert (empty.precision, empty.recall, empty.iou, empty.f[0.4]) == (0, 0, 0, 0)
-    m = mean_scores([s, empty])
-    assert m.precision == pytest.approx(1 / 3)
+    assert np.isnan(empty.precision)
+    assert (empty.recall, empty.iou, empty.f[0.4], empty.f[0.1]) == (0, 0, 0, 0)
+    # nothing predicted and nothing to find: every score is undefined
+    nothing = score_mask(np.zeros((4, 4), bool), np.zeros((4, 4), bool))
+    assert all(
+        np.isnan(v) for v in (nothing.precision, nothing.recall, nothing.iou, nothing.f[1.0])
+    )
+    m = mean_scores([s, empty, nothing])
+    assert m.precision == pytest.approx(2 / 3)  # the empty predictions are left out
+    assert m.recall == pytest.approx(0.25)
+    assert m.f[0.5] == pytest.approx(0.625 / 2)
     with pytest.raises(InputError):
         f_beta(0.5, 0.5, 0.0)
     with pytest.raises(InputError, match="size"):

@@ -19,7 +19,7 @@ TINY += ["--periods", "1", "--flow", "oracle", "--perturb"]
 @pytest.mark.slow
 def test_cli_explore_tiny(tmp_path, capsys):
     out = tmp_path / "ex"
-    assert main(["explore", *TINY, "--grasps", "2", "--out", str(out), "--quiet"]) == 0
+    assert main(["explore", *TINY, "--grasps", "2", "--out", str(out), "--quiet", "--record"]) == 0
     printed = capsys.readouterr().out
     assert "F0.4" in printed and "merged" in printed
     metrics = json.loads((out / "metrics.json").read_text())
@@ -38,6 +38,21 @@ def test_cli_explore_tiny(tmp_path, capsys):
     assert sum(grades.values()) >= executed
     for name in ("start.png", "interaction0_votes.png", "interaction0_flow.png", "merged.png"):
         assert (out / name).stat().st_size > 0, name
+    # every interaction recorded as it happened, in cablesim's format and the published layout
+    from cablesim.formats.mcor import read_mcor, read_multigrasp
+    from cablesim.recording import Recording
+
+    for i in metrics["interactions"]:
+        rec = Recording(out / "recordings" / f"interaction{i['index']}")
+        assert rec.complete == i["success"]
+        if i["success"]:
+            seq = read_mcor(out / "recordings" / "mcor" / f"interaction{i['index']}")
+            assert len(seq.stream) == len(rec)
+            np.testing.assert_allclose(
+                [f.gripper for f in seq.stream.frames], [f.gripper for f in rec], atol=1e-6
+            )
+    groups = read_multigrasp(out / "recordings" / "mcor" / "multigrasp_sequences.json")
+    assert groups == [[f"interaction{i['index']}" for i in ok]]
     video = out / "episode.mp4"
     if video.exists():
         assert count_video_frames(video) > 10

@@ -167,3 +167,41 @@ def test_robot_pixels_labelled_robot():
     robot = snap.labels == LABEL_ROBOT
     assert robot.sum() > 500
     assert np.array_equal(robot, np.isin(snap.body, cam.robot_bodies))
+
+
+def test_mesh_look_labels_what_is_drawn():
+    """``robot.visual="mesh"``: the labels come from the drawn meshes (the segmentation pass
+    sees the very surfaces of the colour pass, so its depth equals the image's depth), not from
+    the hidden collision primitives; with the arm parked, every pixel off the arm is the same
+    as with the primitive look (same clip planes and lighting), and the parked mesh shoulder
+    is the only robot in view."""
+    import mujoco
+
+    from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses
+
+    snaps = {}
+    for visual in ("primitive", "mesh"):
+        cfg = SceneConfig(seed=0, camera=CameraConfig(width=W, height=H))
+        cfg.robot.visual = visual  # the two looks share one settled state (same physics)
+        world = World.build(cfg)
+        with SimCamera(world) as cam:
+            parked = cam.snapshot()
+            world.data.qpos[joint_qpos_addresses(world.model, world.panda.joints)] = HOME_QPOS
+            mujoco.mj_forward(world.model, world.data)
+            home = cam.snapshot()
+            bodies = cam.robot_bodies
+        snaps[visual] = parked, home
+        for s in (parked, home):
+            assert np.array_equal(s.depth, s.image.depth)
+            robot = s.labels == LABEL_ROBOT
+            assert np.array_equal(robot, np.isin(s.body, bodies))
+    (p_park, p_home), (m_park, m_home) = snaps["primitive"], snaps["mesh"]
+    off_arm = (m_park.labels != LABEL_ROBOT) & (p_park.labels != LABEL_ROBOT)
+    assert np.array_equal(p_park.rgb[off_arm], m_park.rgb[off_arm])
+    assert np.array_equal(p_park.image.depth[off_arm], m_park.image.depth[off_arm])
+    assert (p_park.labels == LABEL_ROBOT).sum() == 0
+    parked_arm = np.flatnonzero((m_park.labels == LABEL_ROBOT).any(axis=0))
+    assert parked_arm.size == 0 or parked_arm.min() > 0.9 * W  # the shoulder at the right edge
+    p_robot, m_robot = p_home.labels == LABEL_ROBOT, m_home.labels == LABEL_ROBOT
+    assert m_robot.sum() > 500 and not np.array_equal(p_robot, m_robot)
+    assert (p_robot & m_robot).sum() / (p_robot | m_robot).sum() > 0.6

@@ -1,0 +1,221 @@
+"""A ``franka-sim`` server on 127.0.0.1 serving our Panda: the robot end of the digital twin.
+
+    with FrankaSimServer(object_width=0.015) as server:     # started, ready for a client
+        robot = FrankyPanda("127.0.0.1", T_world_camera, T_world_base, realtime=False)
+
+franka-sim 1.1.7 speaks libfranka's protocol (arm on port 1337, gripper on 1338) but needs
+mujoco 3.2 and numpy 1.26, which clash with this project's mujoco 4.0, so it runs as a
+subprocess from its own environment: the Python named by ``$CABLESIM_FRANKA_SIM_PYTHON``, else
+``.cache/franka-sim-venv/bin/python`` in the repository (see README "Real robot"), else this
+interpreter if it can import ``franka_sim``.  The server is bound to 127.0.0.1 only (its command
+line binds all interfaces, so it is started from Python) and exits on its own after
+``lifetime`` seconds whatever happens to this process.  Its arm model is
+:func:`~cablesim.robot.franky_panda.franka_sim_mjcf` (our Panda); its gripper is franka-sim's
+kinematic hand with a virtual object of ``object_width`` between the fingers (a grasp stops
+there and reports success).
+
+:class:`FrankaSimUnavailable` (with the reason) is raised when the server environment is
+missing or the ports are taken, so that callers (tests) can skip.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from cablesim.errors import CablesimError
+
+HOST = "127.0.0.1"  # never anything else
+PORTS = (1337, 1338)  # libfranka's arm and gripper ports (fixed by the protocol)
+REPO = Path(__file__).resolve().parents[2]
+
+_SCRIPT = """
+import logging, os, signal, sys, threading
+logging.basicConfig(level=logging.INFO, stream=sys.stdout,
+                    format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+threading.Timer({lifetime}, lambda: os._exit(3)).start()  # never outlive the caller
+from franka_sim import FrankaSimServer
+
+def _interrupt(*_):
+    raise KeyboardInterrupt
+
+signal.signal(signal.SIGTERM, _interrupt)
+server = FrankaSimServer(host="{host}", enable_vis=False, enable_gripper=True,
+                         gripper_object_width={object_width}, enforce_motion_limits={enforce},
+                         joint_discontinuity_scale={joint_discontinuity_scale})
+try:
+    server.start()
+except KeyboardInterrupt:
+    pass
+finally:
+    server.stop()
+    os._exit(0)
+"""
+
+
+class FrankaSimUnavailable(CablesimError, RuntimeError):
+    """franka-sim cannot be started here (not installed, or its ports are taken)."""
+
+
+def server_python() -> str | None:
+    """The first Python that can import franka-sim (see the module docstring), or None."""
+    candidates = [
+        os.environ.get("CABLESIM_FRANKA_SIM_PYTHON", ""),
+        str(REPO / ".cache" / "franka-sim-venv" / "bin" / "python"),
+        str(Path.cwd() / ".cache" / "franka-sim-venv" / "bin" / "python"),
+        sys.executable,
+    ]
+    for python in candidates:
+        if not python or not Path(python).exists():
+            continue
+        probe = subprocess.run(
+            [python, "-c", "import franka_sim.franka_sim_server"],
+            capture_output=True,
+            timeout=60,
+            check=False,
+        )
+        if probe.returncode == 0:
+            return python
+    return None
+
+
+def ports_free() -> bool:
+    """Whether libfranka's ports are free on 127.0.0.1 (TCP and UDP)."""
+    for port in PORTS:
+        for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
+            with socket.socket(socket.AF_INET, kind) as s:
+                try:
+                    s.bind((HOST, port))
+                except OSError:
+                    return False
+    return True
+
+
+class FrankaSimServer:
+    """A franka-sim server subprocess on 127.0.0.1 (module docstring); a context manager.
+
+    ``object_width``: the virtual object between the fingers (m), None for an empty hand.
+    ``enforce_motion_limits``: abort motions that break the FCI limits with a reflex, as the
+    robot does.  Timing-induced reflexes (a loaded machine misses control cycles, which the
+    server extrapolates into velocity discontinuities) make long motion sequences flaky on a
+    shared CPU; the digital-twin tests switch it off (limits are still checked and logged).
+    ``joint_discontinuity_scale``: franka-sim judges the joint-side discontinuity of Cartesian
+    commands on its own differential IK of each commanded pose, which trips at the end of
+    ordinary slow motions on this model, so that one check is loosened by default.
+    """
+
+    def __init__(
+        self,
+        object_width: float | None = 0.015,
+        enforce_motion_limits: bool = True,
+        joint_discontinuity_scale: float = 3.0,
+        lifetime: float = 600.0,
+        startup_timeout: float = 60.0,
+        stop_timeout: float = 20.0,
+        workdir: str | os.PathLike[str] | None = None,
+    ) -> None:
+        self.object_width = object_width
+        self.enforce_motion_limits = bool(enforce_motion_limits)
+        self.joint_discontinuity_scale = float(joint_discontinuity_scale)
+        self.lifetime = float(lifetime)
+        self.startup_timeout = float(startup_timeout)
+        self.stop_timeout = float(stop_timeout)
+        self._workdir = None if workdir is None else Path(workdir)
+        self._tmp: tempfile.TemporaryDirectory[str] | None = None
+        self.proc: subprocess.Popen[bytes] | None = None
+        self.log: Path | None = None
+        self._log_text = ""  # kept when the working directory is removed
+
+    @property
+    def host(self) -> str:
+        return HOST
+
+    def start(self) -> FrankaSimServer:
+        """Start the server and wait until it accepts a client; raises
+        :class:`FrankaSimUnavailable` when it cannot run here, ``RuntimeError`` when it died."""
+        from cablesim.robot.franky_panda import franka_sim_mjcf
+
+        python = server_python()
+        if python is None:
+            raise FrankaSimUnavailable(
+                "franka-sim is not installed: see README 'Real robot' "
+                "(.cache/franka-sim-venv or $CABLESIM_FRANKA_SIM_PYTHON)"
+            )
+        if not ports_free():
+            raise FrankaSimUnavailable(
+                f"ports {PORTS} on {HOST} are in use (another franka-sim server?)"
+            )
+        if self._workdir is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="cablesim-franka-sim-")
+            work = Path(self._tmp.name)
+        else:
+            work = self._workdir
+            work.mkdir(parents=True, exist_ok=True)
+        model = work / "panda.xml"
+        model.write_text(franka_sim_mjcf())
+        script = work / "serve.py"
+        script.write_text(
+            _SCRIPT.format(
+                lifetime=self.lifetime,
+                host=HOST,
+                object_width=self.object_width,
+                enforce=self.enforce_motion_limits,
+                joint_discontinuity_scale=self.joint_discontinuity_scale,
+            )
+        )
+        self.log = work / "server.log"
+        env = dict(os.environ, FR3_MJCF=str(model), MUJOCO_GL="egl")
+        with open(self.log, "wb") as out:
+            self.proc = subprocess.Popen(
+                [python, str(script)],
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                env=env,
+                cwd=work,
+                start_new_session=True,
+            )
+        deadline = time.monotonic() + self.startup_timeout
+        while "Server ready for new client connection" not in self.log_text():
+            if self.proc.poll() is not None:
+                code = self.proc.returncode
+                text = self.log_text()[-3000:]
+                self.stop()
+                raise RuntimeError(f"franka-sim exited ({code}):\n{text}")
+            if time.monotonic() > deadline:
+                self.stop()
+                raise RuntimeError(f"franka-sim did not start in {self.startup_timeout:.0f} s")
+            time.sleep(0.1)
+        return self
+
+    def log_text(self) -> str:
+        """The server's output so far (also after it stopped)."""
+        if self.log is not None and self.log.exists():
+            self._log_text = self.log.read_text(errors="replace")
+        return self._log_text
+
+    def stop(self) -> None:
+        """Interrupt the server (SIGINT, then SIGKILL after ``stop_timeout``)."""
+        proc = self.proc
+        if proc is not None and proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+            try:
+                proc.wait(self.stop_timeout)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(5)
+        self.log_text()
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    def __enter__(self) -> FrankaSimServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
