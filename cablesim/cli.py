@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
 import cablesim
+from cablesim.commands._args import output_path
 from cablesim.errors import CablesimError
 
 # name -> one-line help; implementation in cablesim.commands.<name>
@@ -37,18 +39,57 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(f"cablesim.commands.{name}")
         p = sub.add_parser(name, help=help_text, description=module.__doc__)
         module.add_arguments(p)
+        for action in p._actions:  # every --out refuses "" (Path("") is the current directory)
+            if action.dest == "out":
+                action.type = output_path
         p.set_defaults(_run=module.run)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run a subcommand; every expected failure (bad input, a file that cannot be written, an
+    interruption) ends in one line on stderr and a non-zero exit status, never a traceback."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    prefix = f"cablesim {args.command}"
     try:
         return int(args._run(args) or 0)
     except CablesimError as e:
-        print(f"cablesim {args.command}: error: {e}", file=sys.stderr)
+        _say(f"{prefix}: error: {_one_line(e)}")
         return 2
+    except OSError as e:
+        if isinstance(e, BrokenPipeError):  # the reader went away: no more output to stdout
+            _silence_stdout()
+        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        _say(f"{prefix}: error: {where}{e.strerror or _one_line(e)}")
+        return 2
+    except KeyboardInterrupt:
+        _say(f"{prefix}: interrupted")
+        return 130
+
+
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's final flush does not fail again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+
+
+def _say(line: str) -> None:
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError):  # a closed pipe
+        pass
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":

@@ -1,15 +1,30 @@
-"""Helpers shared by the typed, seeded, printable configuration dataclasses."""
+"""Helpers shared by the typed, seeded, printable configuration dataclasses.
+
+One validation style: :func:`check_fields` checks every field of a config dataclass against
+its type hint (an ``int`` field takes an integer but not a bool, a ``float`` field a finite
+real number, a ``str`` a string, a ``tuple[...]`` a sequence of the right length, ...) and
+raises :class:`~cablesim.errors.ConfigError` naming the field and the value; :func:`from_dict`
+checks the values of a mapping the same way before it builds anything.  The ``check_*``
+helpers validate ranges on top of that.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
+import numbers
+import types
 import typing
+from collections.abc import Callable
 from typing import Any, TypeVar
 
 from cablesim.errors import ConfigError
 
 T = TypeVar("T")
+
+#: Makes the error a check raises: ``error(field, message)``.
+ErrorFactory = Callable[[str, str], Exception]
 
 
 def to_dict(cfg: Any) -> dict[str, Any]:
@@ -29,34 +44,211 @@ def to_dict(cfg: Any) -> dict[str, Any]:
     return conv(cfg)
 
 
+# ------------------------------------------------------------------------- type checks
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def is_int(value: Any) -> bool:
+    """An integer (Python or NumPy), but not a bool."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool | _np_bool())
+
+
+def is_real(value: Any) -> bool:
+    """A real number (Python or NumPy, int or float), but not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | _np_bool())
+
+
+def _np_bool() -> type:
+    try:
+        import numpy as np
+    except ImportError:  # pragma: no cover - numpy is a dependency
+        return bool
+    return np.bool_
+
+
+def _hints(cls: type) -> dict[str, Any]:
+    try:
+        return typing.get_type_hints(cls)
+    except Exception:  # noqa: BLE001 - an unresolvable hint: no type checks for that class
+        return {}
+
+
+def check_value(field: str, value: Any, hint: Any, error: ErrorFactory = ConfigError) -> None:
+    """Raise ``error(field, ...)`` unless ``value`` fits the type ``hint``.
+
+    Numbers must be finite; ``int`` refuses bools and floats, ``float`` refuses bools and
+    strings; tuples may come as lists (JSON); nested dataclasses must be instances.  Hints
+    this does not understand (``Any``, arrays, callables) accept anything.
+    """
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if hint is Any:
+        return
+    if hint is None or hint is type(None):
+        if value is not None:
+            raise error(field, f"must be null, got {_short(value)}")
+        return
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return
+        errors = []
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                check_value(field, value, a, error)
+                return
+            except Exception as e:  # noqa: BLE001 - collected, re-raised below
+                errors.append(e)
+        if len(errors) == 1:
+            raise errors[0]
+        names = " or ".join(getattr(a, "__name__", str(a)) for a in args)
+        raise error(field, f"expected {names}, got {_short(value)}")
+    if origin is typing.Literal:
+        if value not in args:
+            raise error(field, f"must be one of {args}, got {_short(value)}")
+        return
+    if origin is tuple:
+        if not isinstance(value, tuple | list):
+            raise error(field, f"expected a sequence, got {_short(value)}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            for i, v in enumerate(value):
+                check_value(f"{field}[{i}]", v, args[0], error)
+            return
+        if args and len(value) != len(args):
+            raise error(field, f"expected {len(args)} values, got {_short(value)}")
+        for i, (v, a) in enumerate(zip(value, args, strict=False)):
+            check_value(f"{field}[{i}]", v, a, error)
+        return
+    if hint is bool:
+        if not isinstance(value, bool | _np_bool()):
+            raise error(field, f"must be true or false, got {_short(value)}")
+        return
+    if hint is int:
+        if not is_int(value):
+            raise error(field, f"must be an integer, got {_short(value)}")
+        return
+    if hint is float:
+        if not is_real(value):
+            raise error(field, f"must be a number, got {_short(value)}")
+        if not math.isfinite(float(value)):
+            raise error(field, f"must be a finite number, got {_short(value)}")
+        return
+    if hint is str:
+        if not isinstance(value, str):
+            raise error(field, f"must be a string, got {_short(value)}")
+        return
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+        if not isinstance(value, hint):
+            raise error(field, f"expected a {hint.__name__}, got {_short(value)}")
+        return
+
+
+def check_fields(cfg: Any, prefix: str = "", error: ErrorFactory = ConfigError) -> None:
+    """Check every field of the dataclass instance ``cfg`` against its type hint (nested
+    dataclasses only for their type: their own ``validate`` checks their fields)."""
+    hints = _hints(type(cfg))
+    for f in dataclasses.fields(cfg):
+        if f.name in hints:
+            check_value(f"{prefix}{f.name}", getattr(cfg, f.name), hints[f.name], error)
+
+
+def _from_value(hint: Any, value: Any, field: str) -> Any:
+    """``value`` (from JSON) made into what the hint wants: nested configs rebuilt, lists made
+    tuples.  Values are type-checked before anything is built."""
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
+        return from_dict(hint, value, f"{field}.")
+    if origin in (typing.Union, types.UnionType) and value is not None:
+        inner = [a for a in args if a is not type(None)]
+        if len(inner) == 1:
+            return _from_value(inner[0], value, field)
+    if origin is tuple and isinstance(value, list | tuple):
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_from_value(args[0], v, f"{field}[{i}]") for i, v in enumerate(value))
+        if args and len(args) == len(value):
+            return tuple(
+                _from_value(a, v, f"{field}[{i}]")
+                for i, (v, a) in enumerate(zip(value, args, strict=True))
+            )
+        return tuple(value)
+    return value
+
+
 def from_dict(cls: type[T], data: dict[str, Any], path: str = "") -> T:
-    """Rebuild a config dataclass from ``to_dict`` output; unknown keys are an error."""
+    """Rebuild a config dataclass from ``to_dict`` output; unknown keys and values of the
+    wrong type are a ``ConfigError`` naming the field."""
     if not isinstance(data, dict):
-        raise ConfigError(path or cls.__name__, f"expected a mapping, got {type(data).__name__}")
-    hints = typing.get_type_hints(cls)
+        raise ConfigError(path.rstrip(".") or cls.__name__, f"expected a mapping, got {data!r}")
+    hints = _hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    unknown = set(data) - names
+    unknown = sorted(str(k) for k in set(data) - names)
     if unknown:
-        raise ConfigError(f"{path}{sorted(unknown)[0]}", f"unknown field for {cls.__name__}")
+        raise ConfigError(f"{path}{unknown[0]}", f"unknown field for {cls.__name__}")
     kwargs: dict[str, Any] = {}
     for name, value in data.items():
-        hint = hints.get(name)
-        if isinstance(hint, type) and dataclasses.is_dataclass(hint):
-            kwargs[name] = from_dict(hint, value, f"{path}{name}.")
-        elif typing.get_origin(hint) is tuple and isinstance(value, list):
-            args = typing.get_args(hint)
-            if args and isinstance(args[0], type) and dataclasses.is_dataclass(args[0]):
-                kwargs[name] = tuple(from_dict(args[0], v, f"{path}{name}.") for v in value)
-            else:
-                kwargs[name] = tuple(tuple(v) if isinstance(v, list) else v for v in value)
-        else:
-            kwargs[name] = value
+        hint = hints.get(name, Any)
+        value = _from_value(hint, value, f"{path}{name}")
+        check_value(f"{path}{name}", value, hint)
+        kwargs[name] = value
     return cls(**kwargs)
 
 
 def pretty(cfg: Any) -> str:
     """Human-readable JSON of a config."""
     return json.dumps(to_dict(cfg), indent=2, sort_keys=False)
+
+
+# ------------------------------------------------------------------------- range checks
+def check_number(
+    field: str,
+    value: Any,
+    lo: float | None = None,
+    hi: float | None = None,
+    error: ErrorFactory = ConfigError,
+) -> float:
+    """A finite real number (not a bool) within [lo, hi]; returns it as a float."""
+    if not is_real(value):
+        raise error(field, f"must be a number, got {_short(value)}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise error(field, f"must be a finite number, got {_short(value)}")
+    if lo is not None and v < lo:
+        raise error(field, f"must be >= {lo}, got {_short(value)}")
+    if hi is not None and v > hi:
+        raise error(field, f"must be <= {hi}, got {_short(value)}")
+    return v
+
+
+def check_int(
+    field: str,
+    value: Any,
+    lo: int | None = None,
+    hi: int | None = None,
+    error: ErrorFactory = ConfigError,
+) -> int:
+    """An integer (not a bool) within [lo, hi]; returns it as an int."""
+    if not is_int(value):
+        raise error(field, f"must be an integer, got {_short(value)}")
+    v = int(value)
+    if lo is not None and v < lo:
+        raise error(field, f"must be >= {lo}, got {v}")
+    if hi is not None and v > hi:
+        raise error(field, f"must be <= {hi}, got {v}")
+    return v
+
+
+def check_vector(
+    field: str, value: Any, n: int, limit: float | None = None, error: ErrorFactory = ConfigError
+) -> tuple[float, ...]:
+    """``n`` finite numbers (each within +-``limit``); returns them as a tuple of floats."""
+    if not isinstance(value, tuple | list) or len(value) != n:
+        raise error(field, f"expected {n} numbers, got {_short(value)}")
+    lo = None if limit is None else -limit
+    return tuple(check_number(f"{field}[{i}]", v, lo, limit, error) for i, v in enumerate(value))
 
 
 class Config:
@@ -80,10 +272,11 @@ class Config:
 def check_range(
     field: str, value: tuple[float, float], lo: float | None = None, hi: float | None = None
 ) -> None:
-    """Validate a (min, max) range field."""
-    if len(value) != 2:
-        raise ConfigError(field, f"expected (min, max), got {value!r}")
-    a, b = float(value[0]), float(value[1])
+    """Validate a (min, max) range field: two finite numbers, min <= max, within [lo, hi]."""
+    if not isinstance(value, tuple | list) or len(value) != 2:
+        raise ConfigError(field, f"expected (min, max), got {_short(value)}")
+    a = check_number(f"{field}[0]", value[0])
+    b = check_number(f"{field}[1]", value[1])
     if a > b:
         raise ConfigError(field, f"min {a} is larger than max {b}")
     if lo is not None and a < lo:
@@ -93,7 +286,7 @@ def check_range(
 
 
 def check_positive(field: str, value: float, allow_zero: bool = False) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ConfigError(field, f"must be a number, got {value!r}")
-    if not (value >= 0 if allow_zero else value > 0):
+    """A finite number > 0 (>= 0 with ``allow_zero``)."""
+    v = check_number(field, value)
+    if not (v >= 0 if allow_zero else v > 0):
         raise ConfigError(field, f"must be {'>= 0' if allow_zero else '> 0'}, got {value!r}")

@@ -11,23 +11,35 @@ Format (``FORMAT = "cablesim-recording"``, ``VERSION = 1``), one directory::
                          labels (HxW int16), grasped_hose (-1 = none), arm_mask (HxW bool)]
     flow/000012.npz      compressed: flow_to_target (HxWx2 float32), flow_valid (HxW bool)
 
-Every file is written to a temporary name, flushed, fsynced and renamed, then its index line
-is appended and fsynced; ``meta.json`` is rewritten (atomically) with ``complete: true`` by
-:meth:`RecordingWriter.close`.  An interrupted recording therefore keeps every frame whose
-index line was written (a partial last index line is ignored); the reader then reports
-``complete = False``.  A missing, truncated or corrupt file raises :class:`RecordingError`
-naming the file and the frame.  Ground truth (labels, flow) is stored only when the frames
-carry it; a real or replayed recording has none.  ``arm_mask`` (the kinematic arm mask, not
-ground truth) is stored when the frame has one; recordings written before it existed read back
-with ``arm_mask = None``.
+Every file is written to a unique temporary name, flushed, fsynced and renamed, then its
+index line is appended and fsynced; ``meta.json`` is rewritten (atomically) with
+``complete: true`` by :meth:`RecordingWriter.close`.  An interrupted recording therefore keeps
+every frame whose index line was written (a partial last index line is ignored); the reader
+then reports ``complete = False``.  A missing, truncated, corrupt or inconsistent file (an
+index entry that names another file than its frame's, values that differ from the index,
+labels or flow of the wrong size) raises :class:`RecordingError` naming the file and the
+frame.  Ground truth (labels, flow) is stored only when the frames carry it; a real or
+replayed recording has none.  ``arm_mask`` (the kinematic arm mask, not ground truth) is
+stored when the frame has one; recordings written before it existed read back with
+``arm_mask = None``.
+
+Overwriting (``overwrite=True`` over an existing recording) writes the new recording into a
+hidden sibling directory (``.NAME.new-*``) and swaps it with the old one when the writer is
+closed (one atomic ``renameat2(RENAME_EXCHANGE)`` where the platform has it), then deletes the
+old one; an interruption before the swap leaves the old recording whole (an exception removes
+the partial new one; a killed process leaves it in its hidden directory).  A directory that is
+not a cablesim recording is never overwritten.
 """
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import io
 import json
 import os
+import secrets
+import shutil
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -57,14 +69,59 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
+def _unique_name(path: Path, tag: str) -> Path:
+    """A hidden sibling of ``path`` no other process or writer will pick."""
+    return path.with_name(f".{path.name}.{tag}-{os.getpid()}-{secrets.token_hex(4)}")
+
+
 def _write_atomic(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    tmp = _unique_name(path, "tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     _fsync_dir(path.parent)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two directories in one atomic step (Linux ``renameat2``); False if unsupported."""
+    try:
+        renameat2 = ctypes.CDLL(None, use_errno=True).renameat2
+    except (OSError, AttributeError):  # pragma: no cover - not glibc
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    return renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), rename_exchange) == 0
+
+
+def _swap_in(new: Path, final: Path) -> None:
+    """Put the recording in ``new`` at ``final`` and delete the one that was there."""
+    if _exchange(new, final):
+        old = new
+    else:  # two renames: a crash between them leaves both whole, the old one hidden
+        old = _unique_name(final, "old")
+        os.rename(final, old)
+        os.rename(new, final)
+    _fsync_dir(final.parent)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def is_recording(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is a directory holding a cablesim recording's ``meta.json``."""
+    meta = Path(path) / "meta.json"
+    try:
+        doc = json.loads(meta.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return False
+    return isinstance(doc, dict) and doc.get("format") == FORMAT
+
+
+def _file_name(kind: str, i: int) -> str:
+    return f"{'frames' if kind == 'frame' else 'flow'}/{int(i):06d}.npz"
 
 
 def _npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
@@ -105,23 +162,48 @@ class RecordingWriter:
         meta: dict[str, Any] | None = None,
         overwrite: bool = False,
     ):
-        self.path = Path(path)
-        if self.path.exists() and any(self.path.iterdir()):
-            if not overwrite:
-                raise RecordingError(f"{self.path} exists and is not empty (use overwrite)")
-            for sub in ("frames", "flow"):
-                for f in (self.path / sub).glob("*"):
-                    f.unlink()
-            for f in ("meta.json", "index.jsonl"):
-                (self.path / f).unlink(missing_ok=True)
-        (self.path / "frames").mkdir(parents=True, exist_ok=True)
-        (self.path / "flow").mkdir(exist_ok=True)
+        self.path = Path(path)  # where the recording is (after close, when overwriting)
+        self.dir = self.path  # where its files are written now
+        # writing beside an old recording, swapped in on close
+        self.replaces = self.check_target(path, overwrite)
+        try:
+            if self.replaces:
+                self.dir = _unique_name(self.path, "new")
+            (self.dir / "frames").mkdir(parents=True, exist_ok=True)
+            (self.dir / "flow").mkdir(exist_ok=True)
+            self._index = open(self.dir / "index.jsonl", "a", encoding="utf-8")  # noqa: SIM115
+        except OSError as e:
+            raise RecordingError(f"{self.path}: cannot write a recording there ({e})") from e
         self.meta = dict(meta or {})
         self.intrinsics: Intrinsics | None = None
         self.frames = 0
         self.closed = False
-        self._index = open(self.path / "index.jsonl", "a", encoding="utf-8")  # noqa: SIM115
         self._write_meta(complete=False)
+
+    @staticmethod
+    def check_target(
+        path: str | os.PathLike[str], overwrite: bool = False, flag: str = "overwrite"
+    ) -> bool:
+        """``RecordingError`` unless a recording can be written at ``path`` (checked before
+        any expensive step); True when it would replace an existing recording."""
+        if str(path).strip() == "":
+            raise RecordingError("the recording path is empty")
+        p = Path(path)
+        if p.exists() and not p.is_dir():
+            raise RecordingError(f"{p} exists and is not a directory")
+        try:
+            occupied = p.is_dir() and any(p.iterdir())
+        except OSError as e:
+            raise RecordingError(f"{p}: cannot be read ({e.strerror or e})") from e
+        if not occupied:
+            return False
+        if not overwrite:
+            raise RecordingError(f"{p} exists and is not empty (use {flag})")
+        if not is_recording(p):
+            raise RecordingError(
+                f"{p} is not a cablesim recording (no readable meta.json); refusing to overwrite it"
+            )
+        return True
 
     def _write_meta(self, complete: bool) -> None:
         doc = {
@@ -132,9 +214,11 @@ class RecordingWriter:
             "frames": self.frames,
             "meta": self.meta,
         }
-        _write_atomic(
-            self.path / "meta.json", json.dumps(doc, indent=2, default=json_default).encode()
-        )
+        data = json.dumps(doc, indent=2, default=json_default).encode()
+        try:
+            _write_atomic(self.dir / "meta.json", data)
+        except OSError as e:
+            raise RecordingError(f"{self.path / 'meta.json'}: cannot be written ({e})") from e
 
     def _append_index(self, entry: dict[str, Any]) -> None:
         self._index.write(json.dumps(entry) + "\n")
@@ -146,21 +230,26 @@ class RecordingWriter:
     ) -> None:
         if self.closed:
             raise RecordingError(f"{self.path}: the recording is closed")
-        rel = f"{'frames' if kind == 'frame' else 'flow'}/{i:06d}.npz"
+        rel = _file_name(kind, i)
         data = _npz_bytes(arrays)
-        _write_atomic(self.path / rel, data)
-        self._append_index(
-            {
-                "kind": kind,
-                "i": int(i),
-                "file": rel,
-                "bytes": len(data),
-                "sha256": hashlib.sha256(data).hexdigest(),
-                **extra,
-            }
-        )
+        try:
+            _write_atomic(self.dir / rel, data)
+            self._append_index(
+                {
+                    "kind": kind,
+                    "i": int(i),
+                    "file": rel,
+                    "bytes": len(data),
+                    "sha256": hashlib.sha256(data).hexdigest(),
+                    **extra,
+                }
+            )
+        except OSError as e:
+            raise RecordingError(f"{self.path / rel}: cannot be written ({e})") from e
 
     def add_frame(self, index: int, frame: Frame) -> None:
+        if not isinstance(frame, Frame):
+            raise InputError(f"frame {index} is a {type(frame).__name__}, not a Frame")
         if self.intrinsics is None:
             self.intrinsics = frame.intrinsics
             self._write_meta(complete=False)
@@ -191,6 +280,8 @@ class RecordingWriter:
         )
 
     def close(self, meta: dict[str, Any] | None = None, complete: bool = True) -> None:
+        """Finish the recording (``complete`` says whether the interaction finished); when
+        overwriting, swap it in for the old one."""
         if self.closed:
             return
         if meta:
@@ -198,6 +289,27 @@ class RecordingWriter:
         self._index.close()
         self._write_meta(complete=complete)
         self.closed = True
+        if self.replaces:
+            try:
+                _swap_in(self.dir, self.path)
+            except OSError as e:
+                raise RecordingError(
+                    f"{self.path}: cannot replace the old recording with the new one in "
+                    f"{self.dir} ({e})"
+                ) from e
+            self.dir = self.path
+
+    def abort(self) -> None:
+        """Stop after an error: a new recording stays (incomplete but readable); one that was
+        to replace an old recording is deleted and the old one stays as it was."""
+        if self.closed:
+            return
+        if not self.replaces:
+            self.close(complete=False)
+            return
+        self._index.close()
+        self.closed = True
+        shutil.rmtree(self.dir, ignore_errors=True)
 
     def __enter__(self) -> RecordingWriter:
         return self
@@ -208,8 +320,11 @@ class RecordingWriter:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        # an exception leaves an incomplete (but readable) recording
-        self.close(complete=exc_type is None)
+        # an exception leaves an incomplete (but readable) recording, or the old one
+        if exc_type is None:
+            self.close(complete=True)
+        else:
+            self.abort()
 
 
 def write_stream(stream: Stream, path: str | os.PathLike[str], overwrite: bool = False) -> Path:
@@ -243,11 +358,17 @@ class Recording:
             raise RecordingError(f"{meta_path}: not a {FORMAT} file")
         if doc.get("version") != VERSION:
             raise RecordingError(f"{meta_path}: unknown version {doc.get('version')!r}")
-        self.complete = bool(doc.get("complete"))
-        self.meta: dict[str, Any] = doc.get("meta") or {}
-        self.intrinsics = (
-            None if doc.get("intrinsics") is None else Intrinsics.from_dict(doc["intrinsics"])
-        )
+        self.complete = doc.get("complete") is True
+        meta = doc.get("meta")
+        if meta is not None and not isinstance(meta, dict):
+            raise RecordingError(f"{meta_path}: 'meta' must be a mapping, got {_short(meta)}")
+        self.meta: dict[str, Any] = meta or {}
+        try:
+            self.intrinsics = (
+                None if doc.get("intrinsics") is None else Intrinsics.from_dict(doc["intrinsics"])
+            )
+        except InputError as e:
+            raise RecordingError(f"{meta_path}: bad intrinsics ({e})") from e
         self._frames: dict[int, dict[str, Any]] = {}
         self._flows: dict[int, dict[str, Any]] = {}
         self._read_index()
@@ -263,20 +384,24 @@ class Recording:
         index = self.path / "index.jsonl"
         if not index.is_file():
             raise RecordingError(f"{index}: missing")
-        lines = index.read_bytes().split(b"\n")
+        try:
+            lines = index.read_bytes().split(b"\n")
+        except OSError as e:
+            raise RecordingError(f"{index}: unreadable ({e})") from e
         for ln, raw in enumerate(lines, 1):
             if not raw.strip():
                 continue
             try:
-                e = json.loads(raw)
-                kind, i = e["kind"], int(e["i"])
-                e["file"], e["bytes"], e["sha256"]
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+                e = _index_entry(raw)
+            except (ValueError, UnicodeDecodeError) as err:
                 last = all(not x.strip() for x in lines[ln:])
                 if last and not self.complete:  # a write interrupted mid-line
                     break
                 raise RecordingError(f"{index}: line {ln} is corrupt ({err})") from err
-            (self._frames if kind == "frame" else self._flows)[i] = e
+            table = self._frames if e["kind"] == "frame" else self._flows
+            if e["i"] in table:
+                raise RecordingError(f"{index}: line {ln} lists {e['kind']} {e['i']} again")
+            table[e["i"]] = e
 
     def __len__(self) -> int:
         return len(self._frames)
@@ -311,7 +436,7 @@ class Recording:
         try:
             truth = None
             if "labels" in a:
-                gh = int(a["grasped_hose"]) if "grasped_hose" in a else -1
+                gh = _scalar(a, "grasped_hose", int) if "grasped_hose" in a else -1
                 truth = FrameTruth(labels=a["labels"], grasped_hose=None if gh < 0 else gh)
                 if i in self._flows:
                     fl = self._load(self._flows[i], f"flow of frame {i}")
@@ -320,16 +445,17 @@ class Recording:
             intr = self.intrinsics
             if intr is None:
                 raise RecordingError(f"{self.path / 'meta.json'}: no intrinsics")
-            return Frame(
+            opening = a.get("gripper_opening")
+            frame = Frame(
                 rgb=a["rgb"],
                 depth=a["depth"],
                 intrinsics=intr,
                 gripper=a["gripper"],
-                action=int(a["action"]),
-                sample=int(a["sample"]),
-                timestamp=float(a["timestamp"]),
+                action=_scalar(a, "action", int),
+                sample=_scalar(a, "sample", int),
+                timestamp=_scalar(a, "timestamp", float),
                 gripper_quat=a.get("gripper_quat"),
-                gripper_opening=float(a["gripper_opening"]) if "gripper_opening" in a else None,
+                gripper_opening=None if opening is None else _scalar(a, "gripper_opening", float),
                 truth=truth,
                 arm_mask=a.get("arm_mask"),
             )
@@ -337,6 +463,13 @@ class Recording:
             raise RecordingError(f"{where}: frame {i} lacks {e}") from e
         except InputError as e:
             raise RecordingError(f"{where}: frame {i} is invalid ({e})") from e
+        for key in ("action", "sample", "timestamp"):  # the index must tell the same
+            if key in entry and entry[key] != getattr(frame, key):
+                raise RecordingError(
+                    f"{where}: frame {i} has {key} {getattr(frame, key)!r} but index.jsonl "
+                    f"lists {entry[key]!r} (entries swapped or edited?)"
+                )
+        return frame
 
     def __iter__(self) -> Iterator[Frame]:
         for i in range(len(self)):
@@ -346,6 +479,47 @@ class Recording:
         if len(self) == 0:
             raise RecordingError(f"{self.path}: the recording has no frames")
         return Stream([self.frame(i) for i in range(len(self))], dict(self.meta))
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _scalar(arrays: dict[str, np.ndarray], key: str, kind: type) -> Any:
+    """A stored scalar as ``int`` or ``float``; ``InputError`` naming it otherwise."""
+    v = arrays[key]
+    ok = (
+        np.issubdtype(v.dtype, np.integer)
+        if kind is int
+        else np.issubdtype(v.dtype, np.integer) or np.issubdtype(v.dtype, np.floating)
+    )
+    if v.shape != () or not ok:
+        raise InputError(f"{key} must be a single {kind.__name__}, got {v.dtype} {v.shape}")
+    return kind(v)
+
+
+def _index_entry(raw: bytes) -> dict[str, Any]:
+    """One parsed, checked index line; ``ValueError`` naming what is wrong."""
+    e = json.loads(raw)
+    if not isinstance(e, dict):
+        raise ValueError(f"expected an object, got {_short(e)}")
+    kind, i = e.get("kind"), e.get("i")
+    if kind not in ("frame", "flow"):
+        raise ValueError(f"unknown kind {_short(kind)}")
+    if isinstance(i, bool) or not isinstance(i, int) or not 0 <= i < 10**6:
+        raise ValueError(f"bad frame number {_short(i)}")
+    if e.get("file") != _file_name(kind, i):
+        raise ValueError(f"{kind} {i} names the file {_short(e.get('file'))}")
+    size, digest = e.get("bytes"), e.get("sha256")
+    if isinstance(size, bool) or not isinstance(size, int) or size < 0:
+        raise ValueError(f"bad byte count {_short(size)}")
+    if not isinstance(digest, str):
+        raise ValueError(f"bad checksum {_short(digest)}")
+    for key, types in (("action", int), ("sample", int), ("timestamp", int | float)):
+        if key in e and (isinstance(e[key], bool) or not isinstance(e[key], types)):
+            raise ValueError(f"bad {key} {_short(e[key])}")
+    return e
 
 
 def read_stream(path: str | os.PathLike[str]) -> Stream:

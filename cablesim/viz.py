@@ -159,8 +159,11 @@ def _rgb(img: np.ndarray) -> np.ndarray:
 
 
 def write_png(path: str | Path, rgb: np.ndarray) -> None:
-    """Write an RGB uint8 image as PNG."""
-    cv2.imwrite(str(path), np.ascontiguousarray(_rgb(rgb)[..., ::-1]))
+    """Write an RGB uint8 image as PNG; ``RecordingError`` if it cannot be written."""
+    if not cv2.imwrite(str(path), np.ascontiguousarray(_rgb(rgb)[..., ::-1])):
+        from cablesim.errors import RecordingError
+
+        raise RecordingError(f"{path}: could not be written")
 
 
 # ---------------------------------------------------------------------------- colour maps
@@ -321,7 +324,7 @@ def flow_legend(height: int, max_mag: float) -> np.ndarray:
     text_w = max(cv2.getTextSize(s, FONT, scale, 1)[0][0] for s in lines)
     line_h = int(24 * scale / 0.5)
     d = int(min(height - 2 * line_h - 16, max(text_w, 60)))
-    d = max(d, 24)
+    d = max(1, min(max(d, 24), height - 8))  # fits images down to 9 px tall
     w = max(d, text_w) + 16
     out = np.full((height, w, 3), 255, np.uint8)
     x0 = (w - d) // 2

@@ -23,6 +23,11 @@ graspable start segment of it (the stand-in for a person's click, given to the a
   in units of pi/2 (``angle * pi/2`` radians from the image x axis, y down; -1 and 1 are the
   same direction); the fingers close across it.
 
+An action that is not such a dict (a missing key, a primitive other than 0 or 1, a point or
+angle that is not finite) raises ``InputError`` naming the key and the value; finite points
+outside [0, 1] are clipped to the image.  The config is checked when the environment is made
+and at every ``reset`` (``ConfigError`` naming the field).
+
 The point and angle become a short line segment (``segment_length`` metres at the point's
 depth), from which the episode runner estimates the grasp centre and axis from depth (SPEC 3.1).
 
@@ -54,6 +59,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -61,12 +67,15 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from cablesim.config import pretty, to_dict
-from cablesim.errors import CablesimError
+from cablesim.config import check_fields, check_int, check_number, pretty, to_dict
+from cablesim.errors import CablesimError, ConfigError, InputError
 from cablesim.sim.perturb import PerturbConfig
 from cablesim.sim.session import EpisodeConfig
 
 PRIMITIVES = ("grasp", "push")
+FLOWS = ("oracle", "dis", "farneback")  # RAFT needs a checkpoint: not offered here
+MERGES = ("dis", "oracle", "none")
+METHODS = ("correlation", "segmentation", "ablation")
 
 
 @dataclass
@@ -102,8 +111,56 @@ class HoseExploreConfig:
             ep, scene=scene, interaction=interaction, perturb=self.perturb
         ).validate()
 
+    def validate(self) -> HoseExploreConfig:
+        """``ConfigError`` naming the first impossible field; returns ``self``."""
+        check_fields(self)
+        check_int("scene_seed", self.scene_seed, 0, 2**31 - 2)
+        check_int("budget", self.budget, 1, 10_000)
+        check_int("merged_votes", self.merged_votes, 1)
+        for name, value, choices in (
+            ("flow", self.flow, FLOWS),
+            ("merge", self.merge, MERGES),
+            ("grasp_method", self.grasp_method, METHODS),
+            ("push_method", self.push_method, METHODS),
+        ):
+            if value not in choices:
+                raise ConfigError(name, f"must be one of {choices}, got {value!r}")
+        check_number("segment_length", self.segment_length, 1e-3, 0.5)
+        if self.hose is not None:
+            check_int("hose", self.hose, 0, self.hoses - 1)
+        self.perturb.validate()
+        self.episode_config(self.scene_seed)  # scene size, hose count, periods, interaction
+        return self
+
     def __str__(self) -> str:
         return pretty(self)
+
+
+def check_action(action: Any) -> tuple[int, np.ndarray, float]:
+    """(primitive, point, angle) of an action dict, or ``InputError`` naming the key."""
+    if not isinstance(action, Mapping):
+        raise InputError(f"the action must be a dict, got {type(action).__name__}")
+    missing = [k for k in ("primitive", "point", "angle") if k not in action]
+    if missing:
+        raise InputError(f"the action lacks {missing} (keys: primitive, point, angle)")
+    p = action["primitive"]
+    p = p.item() if isinstance(p, np.ndarray) and p.size == 1 else p
+    if isinstance(p, bool | np.bool_) or not isinstance(p, int | np.integer):
+        raise InputError(f"action primitive must be 0 (grasp) or 1 (push), got {p!r}")
+    if not 0 <= int(p) < len(PRIMITIVES):
+        raise InputError(f"action primitive must be 0 (grasp) or 1 (push), got {int(p)}")
+    values = {}
+    for key, n in (("point", 2), ("angle", 1)):
+        try:
+            v = np.asarray(action[key], dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError) as e:
+            raise InputError(f"action {key} must be {n} number(s), got {action[key]!r}") from e
+        if v.size != n:
+            raise InputError(f"action {key} must be {n} number(s), got {v.size}")
+        if not np.all(np.isfinite(v)):
+            raise InputError(f"action {key} must be finite, got {v.tolist()}")
+        values[key] = v
+    return int(p), values["point"], float(values["angle"][0])
 
 
 class HoseExploreEnv(gym.Env):
@@ -115,8 +172,14 @@ class HoseExploreEnv(gym.Env):
         self, config: HoseExploreConfig | None = None, render_mode: str | None = None
     ) -> None:
         self.config = config or HoseExploreConfig()
+        if not isinstance(self.config, HoseExploreConfig):
+            raise ConfigError("config", f"expected a HoseExploreConfig, got {self.config!r}")
+        self.config.validate()
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+            raise ConfigError(
+                "render_mode",
+                f"must be one of {self.metadata['render_modes']}, got {render_mode!r}",
+            )
         self.render_mode = render_mode
         h, w = self.config.height, self.config.width
         self.action_space = spaces.Dict(
@@ -169,8 +232,16 @@ class HoseExploreEnv(gym.Env):
         from cablesim.policies.merge import VoteMerger
         from cablesim.sim.session import SimSession
 
-        super().reset(seed=seed)
-        cfg = self.config
+        if seed is not None and (not isinstance(seed, int | np.integer) or seed < 0):
+            raise InputError(f"reset seed must be None or an integer >= 0, got {seed!r}")
+        cfg = self.config.validate()
+        if (cfg.height, cfg.width) != self.observation_space["rgb"].shape[:2]:
+            raise ConfigError(
+                "width/height",
+                f"{cfg.width}x{cfg.height} differs from the observation space the environment "
+                "was made with; make a new environment",
+            )
+        super().reset(seed=None if seed is None else int(seed))
         episode_seed = int(self.np_random.integers(2**31 - 1))
         scene_seed = episode_seed if cfg.randomize_scene else cfg.scene_seed
         world, camera = self._scene(scene_seed)
@@ -208,10 +279,11 @@ class HoseExploreEnv(gym.Env):
         from cablesim.policies.merge import warp_votes
 
         if self._session is None:
-            raise CablesimError("call reset() before step()")
+            raise CablesimError("call reset() before step() (and again after close())")
+        index, point, angle = check_action(action)
         cfg, session = self.config, self._session
-        primitive = PRIMITIVES[int(action["primitive"])]
-        segment = self._line_segment(action)
+        primitive = PRIMITIVES[index]
+        segment = self._line_segment(point, angle)
         info: dict[str, Any] = {"hose": session.hose, "primitive": primitive}
         interaction = session.cfg.interaction.replace(kind=primitive)
         if segment is None:
@@ -243,15 +315,19 @@ class HoseExploreEnv(gym.Env):
         return self._obs(), reward, False, truncated, info
 
     # ------------------------------------------------------------------ helpers
-    def _line_segment(self, action: dict[str, Any]) -> np.ndarray | None:
+    def _line_segment(self, point: np.ndarray, angle: float) -> np.ndarray | None:
         from cablesim.perception.geometry import line_segment_mask
 
         h, w = self.config.height, self.config.width
-        pt = np.clip(np.asarray(action["point"], np.float64).reshape(2), 0.0, 1.0)
-        angle = float(np.asarray(action["angle"]).reshape(-1)[0]) * math.pi / 2
+        pt = np.clip(point, 0.0, 1.0)
         img = self._image
         return line_segment_mask(
-            img.depth, img.intrinsics, pt[0] * w, pt[1] * h, angle, self.config.segment_length
+            img.depth,
+            img.intrinsics,
+            pt[0] * w,
+            pt[1] * h,
+            angle * math.pi / 2,
+            self.config.segment_length,
         )
 
     def _flow_to_previous(self, new_rgb: np.ndarray) -> np.ndarray | None:
@@ -306,6 +382,8 @@ class HoseExploreEnv(gym.Env):
             self._camera.close()
             self._camera = None
         self._session = None
+        self._world = None  # a later reset builds the scene (and its camera) again
+        self._world_seed = None
 
     def config_dict(self) -> dict[str, Any]:
         return to_dict(self.config)

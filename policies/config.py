@@ -15,7 +15,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 
-from cablesim.config import Config
+from cablesim.config import Config, check_fields, check_int
 from cablesim.errors import ConfigError
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.grasp_sampler import GraspSamplerParams
@@ -96,6 +96,7 @@ class ExploreConfig(Config):
         )
 
     def validate(self) -> ExploreConfig:
+        check_fields(self)
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
         if self.strategy not in STRATEGIES:
@@ -112,6 +113,11 @@ class ExploreConfig(Config):
             raise ConfigError("max_attempts", f"must be >= grasps ({self.grasps})")
         if self.merged_votes < 1:
             raise ConfigError("merged_votes", "must be >= 1")
+        check_int("max_attempts", self.max_attempts, 1, 100)
+        check_int("random_tries", self.random_tries, 1)
+        for name in ("width", "height"):
+            if getattr(self, name) is not None:
+                check_int(name, getattr(self, name), 16)
         self.perturb.validate()
         self.episode_config().validate()
         return self

@@ -499,6 +499,10 @@ def explore(
     from .report import ExplorationWriter
 
     cfg = (config or ExploreConfig()).validate()
+    if cfg.flow == "raft":  # the checkpoint is checked before the scene is built
+        from cablesim.perception.raft import check_checkpoint_file
+
+        check_checkpoint_file((flow_kwargs or {}).get("checkpoint"))
     say = progress or Progress("explore", cfg.progress)
     t_start = time.perf_counter()
     session = SimSession.build(cfg.episode_config())

@@ -20,6 +20,25 @@ from cablesim.perception.frames import Frame, Intrinsics, Stream
 from cablesim.recording import Recording
 
 
+def _pose(T: object, path: os.PathLike[str]) -> np.ndarray | None:
+    """The recorded camera pose as a 4x4 rigid transform, or ``RecordingError`` naming it."""
+    if T is None:
+        return None
+    where = f"{os.fspath(path)}/meta.json: meta.T_world_camera"
+    try:
+        M = np.asarray(T, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise RecordingError(f"{where} is not a 4x4 matrix of numbers ({e})") from e
+    if M.shape != (4, 4):
+        raise RecordingError(f"{where} must be a 4x4 matrix, got shape {M.shape}")
+    if not np.all(np.isfinite(M)):
+        raise RecordingError(f"{where} holds non-finite values")
+    R = M[:3, :3]
+    if not np.allclose(M[3], [0, 0, 0, 1]) or not np.allclose(R.T @ R, np.eye(3), atol=1e-3):
+        raise RecordingError(f"{where} is not a rigid transform (rotation and translation)")
+    return M
+
+
 class ReplayCamera(Camera):
     """Replays the frames of a recording in order (``loop=True`` starts again at the end)."""
 
@@ -30,8 +49,7 @@ class ReplayCamera(Camera):
         self.loop = loop
         self.position = 0
         self.last_frame: Frame | None = None
-        T = self.recording.meta.get("T_world_camera")
-        self._T = None if T is None else np.asarray(T, dtype=float).reshape(4, 4)
+        self._T = _pose(self.recording.meta.get("T_world_camera"), self.recording.path)
 
     @property
     def intrinsics(self) -> Intrinsics:

@@ -5,10 +5,60 @@ alike)."""
 from __future__ import annotations
 
 import argparse
+import sys
+import tempfile
+from pathlib import Path
 from typing import Any
 
+from cablesim.errors import InputError
 from cablesim.panda.visuals import VISUALS
 from cablesim.sim.config import SceneConfig
+
+
+def output_path(text: str) -> Path:
+    """argparse ``type`` of ``--out``: a non-empty path (``Path("")`` would be the current
+    directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("the output directory is empty")
+    return Path(text)
+
+
+def prepare_output_dir(out: Path | str, flag: str = "--out") -> Path:
+    """Create the output directory ``out`` (and its parents) and make sure files can be
+    written there, before any expensive step; ``InputError`` naming the flag and the path."""
+    if str(out).strip() == "":
+        raise InputError(f"{flag} is empty: give an output directory")
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{flag} {out}: exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as e:
+        raise InputError(f"{flag} {out}: cannot write there ({e.strerror or e})") from e
+    return out
+
+
+def check_settle_cache(scene: SceneConfig) -> None:
+    """With the settle cache on, make sure ``$CABLESIM_CACHE`` can be written before the
+    scene settles; if it cannot, warn and settle without the cache (same result, no reuse)."""
+    if not scene.physics.cache:
+        return
+    from cablesim.sim.settle import cache_dir
+
+    where = cache_dir()
+    try:
+        where.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=where):
+            pass
+    except OSError as e:
+        print(
+            f"cablesim: warning: the settle cache {where} is not writable "
+            f"({e.strerror or e}; set CABLESIM_CACHE); settling without it",
+            file=sys.stderr,
+        )
+        scene.physics.cache = False
 
 
 def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed") -> None:

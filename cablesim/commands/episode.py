@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 import numpy as np
 
@@ -26,9 +25,12 @@ from cablesim.commands._args import (
     add_scene_arguments,
     apply_interaction_arguments,
     apply_scene_arguments,
+    check_settle_cache,
+    output_path,
+    prepare_output_dir,
 )
-from cablesim.errors import RecordingError
 from cablesim.perception.frames import LABEL_ROBOT, Stream
+from cablesim.recording import RecordingWriter
 from cablesim.sim.session import EpisodeConfig
 from cablesim.viz import (
     SEGMENT_COLOUR,
@@ -44,7 +46,7 @@ from cablesim.viz import (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p, "episode and scene seed")
     p.add_argument("--hose", type=int, default=None, help="hose to grasp (default: drawn)")
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=output_path, required=True, help="output directory")
     add_interaction_arguments(p)
     p.add_argument("--push", action="store_true", help="push (poke) instead of grasping")
     p.add_argument("--overwrite", action="store_true", help="replace an existing recording")
@@ -85,11 +87,9 @@ def run(args: argparse.Namespace) -> int:
     from cablesim.sim.session import simulate_episode
 
     cfg = config_from_args(args)
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    rec = out / "recording"
-    if rec.exists() and any(rec.iterdir()) and not args.overwrite:
-        raise RecordingError(f"{rec} exists and is not empty (use --overwrite)")
+    out = prepare_output_dir(args.out)
+    RecordingWriter.check_target(out / "recording", args.overwrite, "--overwrite")
+    check_settle_cache(cfg.scene)
     if cfg.progress:
         print(f"[episode] config:\n{cfg}")
     ep = simulate_episode(cfg, record_to=out / "recording", overwrite=args.overwrite)

@@ -34,6 +34,8 @@ from cablesim.commands._args import (
     add_scene_arguments,
     apply_interaction_arguments,
     apply_scene_arguments,
+    check_settle_cache,
+    prepare_output_dir,
 )
 from cablesim.errors import InputError
 from cablesim.policies.config import FLOWS, MERGES, STRATEGIES, ExploreConfig
@@ -109,16 +111,21 @@ def _flow_kwargs(cfg: ExploreConfig, args: argparse.Namespace) -> dict | None:
         return None
     if args.raft_checkpoint is None:
         raise InputError("--flow raft needs --raft-checkpoint (no weights are downloaded)")
+    from cablesim.perception.raft import load_raft
+
+    load_raft(args.raft_checkpoint)  # file, torch and weights checked before anything is built
     return {"checkpoint": args.raft_checkpoint}
 
 
 def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     flow_kwargs = _flow_kwargs(cfg, args)
+    args.out = prepare_output_dir(args.out)
     if args.robot != "sim":
         return run_real(args, cfg, flow_kwargs)
     from cablesim.policies.explore import explore
 
+    check_settle_cache(cfg.episode.scene)
     record_to = args.out / "recordings" if args.record else None
     res = explore(cfg, out=args.out, flow_kwargs=flow_kwargs, record_to=record_to)
     print(res.summary())

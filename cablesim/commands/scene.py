@@ -20,7 +20,13 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from cablesim.commands._args import add_scene_arguments, apply_scene_arguments
+from cablesim.commands._args import (
+    add_scene_arguments,
+    apply_scene_arguments,
+    check_settle_cache,
+    output_path,
+    prepare_output_dir,
+)
 from cablesim.config import to_dict
 from cablesim.errors import InputError
 from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
@@ -45,7 +51,7 @@ PULL_MAX_FORCE = 6.0  # N
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=output_path, required=True, help="output directory")
     p.add_argument("--background", choices=BACKGROUNDS, default=None, help="board background")
     p.add_argument("--hose", type=int, default=0, help="which hose to pull (default 0)")
     p.add_argument("--no-robot", action="store_true", help="leave the arm out of the scene")
@@ -100,8 +106,8 @@ def run(args: argparse.Namespace) -> int:
     cfg = scene_config(args)
     if not 0 <= args.hose < cfg.hoses.count:
         raise InputError(f"--hose {args.hose} is not one of the {cfg.hoses.count} hoses")
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    out = prepare_output_dir(args.out)
+    check_settle_cache(cfg)
     t0 = time.perf_counter()
     print(
         f"[scene] building seed {cfg.seed}: {cfg.hoses.count} hoses, "

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from cablesim.config import Config, check_positive
+from cablesim.config import Config, check_fields, check_positive, check_vector
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
 
@@ -39,6 +39,7 @@ class GraspConfig:
     open_width: float = 0.08
 
     def validate(self) -> None:
+        check_fields(self, "grasp.")
         for name in (
             "pregrasp_offset",
             "approach_speed",
@@ -66,11 +67,13 @@ class ActionConfig:
     stroke_tolerance: float = 0.01  # m a stroke may end off its target (a taut hose pulls back)
 
     def validate(self) -> None:
+        check_fields(self, "actions.")
         for d in self.directions:
             if d not in DIRECTION_NAMES:
                 raise ConfigError("actions.directions", f"unknown {d!r}; use {DIRECTION_NAMES}")
         for i, v in enumerate(self.extra_directions):
-            if len(v) != 3 or sum(x * x for x in v) < 1e-12:
+            check_vector(f"actions.extra_directions[{i}]", v, 3)
+            if sum(x * x for x in v) < 1e-12:
                 raise ConfigError(f"actions.extra_directions[{i}]", f"bad vector {v!r}")
         if not self.directions and not self.extra_directions:
             raise ConfigError("actions.directions", "need at least one action direction")
@@ -94,6 +97,7 @@ class CaptureConfig:
     arm_mask_margin: int = 3  # pixels the arm mask is dilated by
 
     def validate(self) -> None:
+        check_fields(self, "capture.")
         check_positive("capture.frame_rate", self.frame_rate)
         if isinstance(self.arm_mask_margin, bool) or not isinstance(self.arm_mask_margin, int):
             raise ConfigError(
@@ -131,8 +135,11 @@ class RetreatConfig:
     still_time: float = 1.0  # s the frames must stay still (camera)
 
     def __post_init__(self) -> None:
-        if self.qpos is not None:  # from JSON: a list
-            self.qpos = tuple(float(q) for q in self.qpos)
+        if isinstance(self.qpos, list | tuple):  # from JSON: a list
+            try:
+                self.qpos = tuple(float(q) for q in self.qpos)
+            except (TypeError, ValueError):  # named by validate()
+                self.qpos = tuple(self.qpos)
 
     def joint_target(self, park: tuple[float, ...] | None = None) -> tuple[float, ...]:
         """The retreat joint configuration: ``qpos``, else ``park``, else ``PARK_QPOS``."""
@@ -141,6 +148,7 @@ class RetreatConfig:
         return tuple(park) if park is not None else tuple(PARK_QPOS)
 
     def validate(self) -> None:
+        check_fields(self, "retreat.")
         if self.qpos is not None and len(self.qpos) != 7:
             raise ConfigError("retreat.qpos", f"need 7 joint angles, got {len(self.qpos)}")
         check_positive("retreat.back_off", self.back_off, allow_zero=True)
@@ -170,6 +178,7 @@ class InteractionConfig(Config):
     retreat: RetreatConfig = field(default_factory=RetreatConfig)
 
     def validate(self) -> InteractionConfig:
+        check_fields(self)
         if self.kind not in KINDS:
             raise ConfigError("kind", f"must be one of {KINDS}, got {self.kind!r}")
         check_positive("push_depth", self.push_depth)

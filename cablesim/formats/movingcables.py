@@ -63,8 +63,18 @@ def encode_values(values: np.ndarray) -> np.ndarray:
 
 
 def encode_flow_png(flow: np.ndarray, third: np.ndarray | None = None) -> np.ndarray:
-    """HxWx3 uint16 in RGB order: encoded x, encoded y, ``third`` (uint16, default 0)."""
+    """HxWx3 uint16 in RGB order: encoded x, encoded y, ``third`` (uint16, default 0).
+
+    Finite flow outside the encodable range (-512 <= flow < 512 px) is an ``InputError``
+    rather than clipped into a wrong, valid-looking value (clip it yourself if that is meant)."""
     flow = as_flow(flow)
+    finite = flow[np.isfinite(flow)]
+    lo, hi = -FLOW_OFFSET / FLOW_SCALE, (65536 - FLOW_OFFSET) / FLOW_SCALE
+    if finite.size and (finite.min() < lo or finite.max() >= hi):
+        raise InputError(
+            f"flow of {finite.min():.6g}..{finite.max():.6g} px does not fit a flow PNG "
+            f"({lo:g} <= flow < {hi:g} px); it would be clipped"
+        )
     h, w = flow.shape[:2]
     out = np.zeros((h, w, 3), np.uint16)
     out[..., :2] = encode_values(flow)

@@ -2,9 +2,24 @@
 
 from __future__ import annotations
 
+import math
+import numbers
+from typing import Any
+
 import numpy as np
 
+from cablesim.config import check_fields
 from cablesim.errors import InputError
+
+
+def _param_error(field: str, message: str) -> InputError:
+    return InputError(f"{field}: {message}")
+
+
+def check_params(params: Any, prefix: str = "") -> None:
+    """Check every field of a parameter dataclass against its type hint (finite numbers,
+    integers that are not bools, ...); ``InputError`` naming the field and the value."""
+    check_fields(params, prefix, _param_error)
 
 
 def as_flow(flow: object, shape: tuple[int, int] | None = None, name: str = "flow") -> np.ndarray:
@@ -20,8 +35,14 @@ def as_flow(flow: object, shape: tuple[int, int] | None = None, name: str = "flo
     return np.ascontiguousarray(flow, dtype=np.float32)
 
 
-def as_mask(mask: object, shape: tuple[int, int] | None = None, name: str = "mask") -> np.ndarray:
-    """Return ``mask`` as an HxW bool array or raise ``InputError``."""
+def as_mask(
+    mask: object, shape: tuple[int, int] | None = None, name: str = "mask", binary: bool = False
+) -> np.ndarray:
+    """Return ``mask`` as an HxW bool array or raise ``InputError``.
+
+    An integer array counts as a mask where it is non-zero; with ``binary`` it must hold only
+    0 and 1 (a label image, where -1 is background, is refused rather than read as a mask).
+    """
     if not isinstance(mask, np.ndarray):
         raise InputError(f"{name} must be a numpy array, got {type(mask).__name__}")
     if mask.ndim != 2:
@@ -31,6 +52,11 @@ def as_mask(mask: object, shape: tuple[int, int] | None = None, name: str = "mas
     if mask.dtype != np.bool_:
         if not (np.issubdtype(mask.dtype, np.integer)):
             raise InputError(f"{name} must be bool or integer 0/1, got {mask.dtype}")
+        if binary and mask.size and (mask.min() < 0 or mask.max() > 1):
+            raise InputError(
+                f"{name} must be a mask (bool, or integers 0/1), got values "
+                f"{mask.min()}..{mask.max()}: a label image? compare it with a label first"
+            )
         mask = mask != 0
     return mask
 
@@ -42,6 +68,8 @@ def as_image(img: object, name: str = "image") -> np.ndarray:
     if img.dtype != np.uint8:
         raise InputError(f"{name} must be uint8, got {img.dtype}")
     if img.ndim == 2 or (img.ndim == 3 and img.shape[2] in (1, 3)):
+        if img.shape[0] == 0 or img.shape[1] == 0:
+            raise InputError(f"{name} is empty ({img.shape[1]}x{img.shape[0]} px)")
         return img
     raise InputError(f"{name} must be HxW or HxWx3, got shape {img.shape}")
 
@@ -66,8 +94,28 @@ def valid_depth(depth: np.ndarray) -> np.ndarray:
     return np.isfinite(depth) & (depth > 0)
 
 
+def is_real(value: object) -> bool:
+    """A real number (Python or NumPy), not a bool."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+
+
+def as_real(value: object, name: str, finite: bool = True) -> float:
+    """``value`` as a float, or ``InputError`` unless it is a (finite) real number."""
+    if not is_real(value):
+        raise InputError(f"{name} must be a number, got {value!r}")
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except OverflowError:  # an integer beyond the float range
+        v = math.copysign(math.inf, value)  # type: ignore[arg-type]
+    if finite and not math.isfinite(v):
+        raise InputError(f"{name} must be finite, got {value!r}")
+    return v
+
+
 def check_positive(value: float, name: str) -> float:
-    v = float(value)
+    if not is_real(value):
+        raise InputError(f"{name} must be a positive number, got {value!r}")
+    v = as_real(value, name, finite=False)
     if not np.isfinite(v) or v <= 0:
         raise InputError(f"{name} must be positive and finite, got {value!r}")
     return v

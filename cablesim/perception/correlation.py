@@ -35,7 +35,14 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_depth, as_flow, check_positive, valid_depth
+from cablesim.perception._checks import (
+    as_depth,
+    as_flow,
+    as_real,
+    check_params,
+    check_positive,
+    valid_depth,
+)
 
 DepthMode = Literal["gripper", "pixel"]
 
@@ -51,6 +58,7 @@ class CorrelationParams:
     min_samples: int = 3  # used samples needed at a pixel for a fit
 
     def __post_init__(self) -> None:
+        check_params(self)
         if self.tau_n < 0:
             raise InputError(f"tau_n must be >= 0, got {self.tau_n}")
         if self.depth_mode not in ("gripper", "pixel"):
@@ -69,6 +77,7 @@ class AblationParams:
     min_samples: int = 3
 
     def __post_init__(self) -> None:
+        check_params(self)
         if self.tau_n < 0:
             raise InputError(f"tau_n must be >= 0, got {self.tau_n}")
         if self.std_min < 0:
@@ -119,7 +128,10 @@ class CorrelationAccumulator:
         dtype: type = np.float32,
     ) -> None:
         self.params = params if params is not None else CorrelationParams()
-        h, w = int(shape[0]), int(shape[1])
+        try:
+            h, w = int(shape[0]), int(shape[1])
+        except (TypeError, ValueError, IndexError) as e:
+            raise InputError(f"shape must be (height, width), got {shape!r}") from e
         if h <= 0 or w <= 0:
             raise InputError(f"shape must be positive, got {shape}")
         self.shape = (h, w)
@@ -142,9 +154,9 @@ class CorrelationAccumulator:
 
     def update(self, flow: np.ndarray, d_g: float, z: float | None = None) -> None:
         flow = as_flow(flow, self.shape)
-        d_g = float(d_g)
-        if not np.isfinite(d_g):
-            raise InputError(f"d_g must be finite, got {d_g}")
+        d_g = as_real(d_g, "d_g")
+        if z is not None:
+            z = as_real(z, "gripper depth z", finite=False)
         if self.params.depth_mode == "gripper":
             if z is None or not np.isfinite(z) or z <= 0:
                 raise InputError(f"depth_mode 'gripper' needs a positive gripper depth, got {z!r}")

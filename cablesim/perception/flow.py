@@ -16,6 +16,7 @@ Back ends: :class:`OracleFlow` (simulator ground truth, evaluation/upper bound),
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any
@@ -24,7 +25,7 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_image
+from cablesim.perception._checks import as_image, check_params
 from cablesim.perception.frames import Frame
 
 DIS_PRESETS = {
@@ -58,6 +59,8 @@ def texture_mask(gray: np.ndarray, window: int = 7, threshold: float = 6.0) -> n
     ``threshold``.  This is the trace of the structure tensor.
     """
     gray = to_gray(gray, "gray")
+    if isinstance(window, bool) or not isinstance(window, int | np.integer) or window < 1:
+        raise InputError(f"texture window must be an integer >= 1, got {window!r}")
     g = gray.astype(np.float32)
     gx = cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
     gy = cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
@@ -138,6 +141,13 @@ class GateParams:
     window: int = 7
     threshold: float = 6.0
 
+    def __post_init__(self) -> None:
+        check_params(self, "gate.")
+        if self.window < 1:
+            raise InputError(f"gate.window must be >= 1, got {self.window}")
+        if self.threshold < 0:
+            raise InputError(f"gate.threshold must be >= 0, got {self.threshold}")
+
 
 class DISFlow(FlowEstimator):
     """OpenCV DIS optical flow (CPU default) with a low-texture gate.
@@ -165,6 +175,30 @@ class DISFlow(FlowEstimator):
             self._dis.setVariationalRefinementIterations(int(variational_refinement_iters))
         self._gate_cache: tuple[int, np.ndarray] | None = None
 
+    def check_size(self, width: int, height: int) -> None:
+        """``InputError`` unless DIS can work on a ``width`` x ``height`` image.
+
+        DIS picks its coarsest pyramid level from the image size (the rule of OpenCV's
+        ``DISOpticalFlowImpl::calc``); below the preset's finest level OpenCV raises or, for
+        some sizes, crashes the process, so such sizes are refused here.
+        """
+        patch, finest = self._dis.getPatchSize(), self._dis.getFinestScale()
+        lo, hi = min(width, height), max(width, height)
+        ok = (
+            lo > 0
+            and min(
+                math.trunc(math.log2(hi / (4.0 * patch)) + 0.5), math.trunc(math.log2(lo / patch))
+            )
+            >= finest
+        )
+        if not ok:
+            need_lo = patch * 2**finest
+            need_hi = math.ceil(4 * patch * 2 ** (finest - 0.5))
+            raise InputError(
+                f"the image ({width}x{height} px) is too small for DIS preset {self.preset!r}: "
+                f"it needs at least {need_lo} px on the short side and {need_hi} px on the long"
+            )
+
     def _gate(self, gray1: np.ndarray) -> np.ndarray:
         # the target image is the first image of every call: cache its gate
         key = hash(gray1.tobytes())
@@ -176,6 +210,7 @@ class DISFlow(FlowEstimator):
 
     def compute(self, image1: np.ndarray, image2: np.ndarray) -> np.ndarray:
         g1, g2 = _check_pair(image1, image2)
+        self.check_size(g1.shape[1], g1.shape[0])
         flow = self._dis.calc(g1, g2, None)
         flow = np.ascontiguousarray(flow, np.float32)
         if self.gate.enabled:

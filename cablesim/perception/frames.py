@@ -16,6 +16,8 @@ Conventions
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,6 +29,13 @@ from cablesim.errors import InputError
 TARGET_ACTION = -1
 LABEL_BACKGROUND = -1
 LABEL_ROBOT = -2
+
+
+def _finite(v: numbers.Real) -> bool:
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:  # an integer beyond the float range
+        return False
 
 
 @dataclass(frozen=True)
@@ -41,15 +50,20 @@ class Intrinsics:
     height: int
 
     def __post_init__(self) -> None:
+        for name in ("fx", "fy", "cx", "cy"):
+            v = getattr(self, name)
+            if isinstance(v, bool | np.bool_) or not isinstance(v, numbers.Real):
+                raise InputError(f"intrinsics.{name} must be a number, got {v!r}")
+            if not _finite(v):
+                raise InputError(f"intrinsics.{name} must be finite, got {v!r}")
         for name in ("fx", "fy"):
             v = getattr(self, name)
-            if not np.isfinite(v) or v <= 0:
+            if v <= 0:
                 raise InputError(f"intrinsics.{name} must be a positive focal length, got {v!r}")
-        for name in ("cx", "cy"):
-            if not np.isfinite(getattr(self, name)):
-                raise InputError(f"intrinsics.{name} must be finite")
-        if int(self.width) <= 0 or int(self.height) <= 0:
-            raise InputError(f"intrinsics size must be positive, got {self.width}x{self.height}")
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, bool | np.bool_) or not isinstance(v, int | np.integer) or v <= 0:
+                raise InputError(f"intrinsics.{name} must be a positive integer, got {v!r}")
 
     @property
     def K(self) -> np.ndarray:
@@ -97,17 +111,28 @@ class Intrinsics:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Intrinsics:
+        """From ``to_dict`` output (JSON): numbers for the focal lengths and principal point,
+        integers (or integral numbers) for the size; ``InputError`` naming the field."""
+        if not isinstance(d, dict):
+            raise InputError(f"intrinsics must be a mapping, got {d!r}")
         missing = [k for k in ("fx", "fy", "cx", "cy", "width", "height") if k not in d]
         if missing:
             raise InputError(f"intrinsics missing {missing}")
-        return cls(
-            float(d["fx"]),
-            float(d["fy"]),
-            float(d["cx"]),
-            float(d["cy"]),
-            int(d["width"]),
-            int(d["height"]),
-        )
+        values: dict[str, Any] = {}
+        for k in ("fx", "fy", "cx", "cy", "width", "height"):
+            v = d[k]
+            if isinstance(v, bool | np.bool_) or not isinstance(v, numbers.Real):
+                raise InputError(f"intrinsics.{k} must be a number, got {v!r}")
+            if not _finite(v):
+                raise InputError(f"intrinsics.{k} must be finite, got {v!r}")
+            if k in ("width", "height"):
+                if not float(v).is_integer():
+                    raise InputError(f"intrinsics.{k} must be a whole number of pixels, got {v!r}")
+                v = int(v)
+            else:
+                v = float(v)
+            values[k] = v
+        return cls(**values)
 
 
 @dataclass
@@ -150,10 +175,32 @@ class Frame:
 
     def __post_init__(self) -> None:
         validate_rgbd(self.rgb, self.depth, self.intrinsics)
-        g = np.asarray(self.gripper, dtype=np.float64)
+        for name in ("action", "sample"):
+            v = getattr(self, name)
+            if isinstance(v, bool | np.bool_) or not isinstance(v, int | np.integer):
+                raise InputError(f"frame {name} must be an integer, got {v!r}")
+        t = self.timestamp
+        if isinstance(t, bool | np.bool_) or not isinstance(t, numbers.Real):
+            raise InputError(f"frame timestamp must be a number, got {t!r}")
+        if not _finite(t):
+            raise InputError(f"frame timestamp must be finite, got {t!r}")
+        try:
+            g = np.asarray(self.gripper, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise InputError(f"gripper must be 3 numbers, got {self.gripper!r}") from e
         if g.shape != (3,):
             raise InputError(f"gripper must have shape (3,), got {g.shape}")
         self.gripper = g
+        if self.gripper_quat is not None:
+            q = np.asarray(self.gripper_quat)
+            if q.shape != (4,) or not np.issubdtype(q.dtype, np.number):
+                raise InputError(f"gripper_quat must be 4 numbers (wxyz), got {q.dtype} {q.shape}")
+        if self.gripper_opening is not None:
+            v = self.gripper_opening
+            if isinstance(v, bool | np.bool_) or not isinstance(v, numbers.Real):
+                raise InputError(f"gripper_opening must be a number, got {v!r}")
+        if self.truth is not None:
+            check_truth(self.truth, self.rgb.shape[:2])
         if self.arm_mask is not None:
             m = np.asarray(self.arm_mask)
             if m.shape != self.rgb.shape[:2]:
@@ -169,6 +216,33 @@ class Frame:
     @property
     def shape(self) -> tuple[int, int]:
         return self.rgb.shape[:2]
+
+
+def check_truth(truth: FrameTruth, shape: tuple[int, int]) -> None:
+    """``InputError`` unless the ground truth fits an image of ``shape`` (HxW)."""
+    if not isinstance(truth, FrameTruth):
+        raise InputError(f"truth must be a FrameTruth, got {type(truth).__name__}")
+    labels = truth.labels
+    if not isinstance(labels, np.ndarray) or not np.issubdtype(labels.dtype, np.integer):
+        raise InputError(f"truth labels must be an integer array, got {type(labels).__name__}")
+    if labels.shape != tuple(shape):
+        raise InputError(f"truth labels have shape {labels.shape}, the image is {tuple(shape)}")
+    gh = truth.grasped_hose
+    if gh is not None and (isinstance(gh, bool) or not isinstance(gh, int | np.integer)):
+        raise InputError(f"truth grasped_hose must be an integer or None, got {gh!r}")
+    if truth.flow_to_target is not None:
+        flow = truth.flow_to_target
+        if not isinstance(flow, np.ndarray) or flow.shape != (*shape, 2):
+            raise InputError(
+                f"truth flow_to_target has shape {getattr(flow, 'shape', None)}, "
+                f"expected {(*shape, 2)}"
+            )
+    if truth.flow_valid is not None:
+        valid = truth.flow_valid
+        if not isinstance(valid, np.ndarray) or valid.shape != tuple(shape):
+            raise InputError(
+                f"truth flow_valid has shape {getattr(valid, 'shape', None)}, expected {shape}"
+            )
 
 
 def validate_rgbd(rgb: np.ndarray, depth: np.ndarray | None, intrinsics: Intrinsics | None) -> None:
@@ -203,12 +277,22 @@ class Stream:
     meta: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.frames, list):
+            self.frames = list(self.frames)
         if not self.frames:
             raise InputError("a stream needs at least one frame")
+        for i, f in enumerate(self.frames):
+            if not isinstance(f, Frame):
+                raise InputError(f"frame {i} is a {type(f).__name__}, not a Frame")
         shape = self.frames[0].shape
+        intrinsics = self.frames[0].intrinsics
         for i, f in enumerate(self.frames):
             if f.shape != shape:
                 raise InputError(f"frame {i} has size {f.shape}, the stream is {shape}")
+            if f.intrinsics != intrinsics:
+                raise InputError(
+                    f"frame {i} has other intrinsics than frame 0 ({f.intrinsics} vs {intrinsics})"
+                )
 
     def __len__(self) -> int:
         return len(self.frames)

@@ -12,7 +12,8 @@ successfully sampled segment: centre within ``blacklist_distance`` or mask overl
 ``blacklist_overlap``), ``too_close`` (closer than G_min to a previous grasp),
 ``unreachable: <reason>`` (the reachability callback said no).
 
-Order: for v from the highest vote level down to ``min_votes``; within a level, for
+Order: for v from the highest vote level down to ``min_votes`` (only the levels some pixel
+has: a level no pixel has gives the same mask as the next higher one); within a level, for
 G = G_max, G_max - G_delta, ..., G_min: valid candidates at least G from all previous grasps,
 sorted by mean votes then area (largest first).  The first candidate the reachability
 callback accepts is the proposal.
@@ -27,12 +28,15 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_depth, valid_depth
+from cablesim.perception._checks import as_depth, check_params, valid_depth
 from cablesim.perception.frames import Intrinsics
 from cablesim.perception.geometry import eccentricity, segment_pose
 from cablesim.perception.skeleton import split_skeleton, thinning
 
 Reachability = Callable[[np.ndarray, np.ndarray], tuple[bool, str]]
+
+#: Distinct vote levels a vote image may have (votes count actions: a few per grasp).
+MAX_VOTE_LEVELS = 1024
 
 
 @dataclass(frozen=True)
@@ -54,10 +58,33 @@ class GraspSamplerParams:
     min_votes: int = 1
 
     def __post_init__(self) -> None:
+        check_params(self)
+        for name in (
+            "gather_radius_px",
+            "min_depth_fraction",
+            "max_out_of_plane_deg",
+            "inlier_distance",
+            "blacklist_distance",
+            "blacklist_overlap",
+        ):
+            if getattr(self, name) < 0:
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.gather_radius_px > 1e6:
+            raise InputError(f"gather_radius_px must be <= 1e6, got {self.gather_radius_px}")
+        for name in ("segment_length_px", "area_min", "area_max", "min_depth_points", "min_votes"):
+            if getattr(self, name) >= 2**31:
+                raise InputError(f"{name} must be < 2**31, got {getattr(self, name)}")
+        if self.min_depth_points < 1:
+            raise InputError(f"min_depth_points must be >= 1, got {self.min_depth_points}")
         if self.area_min > self.area_max:
             raise InputError(f"area_min {self.area_min} > area_max {self.area_max}")
         if not 0 < self.g_min <= self.g_max or self.g_delta <= 0:
             raise InputError("need 0 < g_min <= g_max and g_delta > 0")
+        if (self.g_max - self.g_min) / self.g_delta > 1000:
+            raise InputError(
+                f"g_delta {self.g_delta} makes more than 1000 frontiers from g_max {self.g_max} "
+                f"to g_min {self.g_min}"
+            )
         if self.segment_length_px < 2:
             raise InputError("segment_length_px must be >= 2")
         if self.min_votes < 1:
@@ -65,8 +92,10 @@ class GraspSamplerParams:
 
     def frontiers(self) -> list[float]:
         gs, g = [], self.g_max
-        while g >= self.g_min - 1e-9:
+        while g >= self.g_min - 1e-9 and len(gs) <= 1000:
             gs.append(round(g, 9))
+            if g - self.g_delta >= g:  # below float resolution at this magnitude
+                break
             g -= self.g_delta
         return gs
 
@@ -232,13 +261,22 @@ class GraspSampler:
             )
         if not (np.issubdtype(votes.dtype, np.integer) or votes.dtype == np.bool_):
             raise InputError(f"votes must be an integer (or bool) image, got {votes.dtype}")
-        votes = votes.astype(np.int32)
+        if votes.ndim != 2 or votes.size == 0:
+            raise InputError(f"votes must be a non-empty HxW image, got shape {votes.shape}")
+        if votes.dtype == np.uint64 and votes.max() > np.iinfo(np.int64).max:
+            raise InputError(f"votes up to {votes.max()} do not fit a 64-bit signed integer")
+        votes = votes.astype(np.int64)  # no wrap-around whatever the input's integer type
         p = self.params
         ok_depth = valid_depth(depth)
         result = SamplingResult(None)
         unreachable: list[tuple[np.ndarray, str]] = []
-        top = int(votes.max(initial=0))
-        for level in range(top, p.min_votes - 1, -1):
+        levels = np.unique(votes[votes >= p.min_votes])[::-1]
+        if len(levels) > MAX_VOTE_LEVELS:
+            raise InputError(
+                f"votes have {len(levels)} distinct levels >= {p.min_votes} (at most "
+                f"{MAX_VOTE_LEVELS}): a vote image counts the actions supporting each pixel"
+            )
+        for level in (int(v) for v in levels):
             level_mask = votes >= level
             cands = []
             for m in candidate_segments(level_mask, p):

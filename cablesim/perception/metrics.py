@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_flow, as_mask
+from cablesim.perception._checks import as_flow, as_mask, is_real
 from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
 
 BETAS: tuple[float, ...] = (1.0, 0.5, 0.4, 0.3, 0.2, 0.1)
@@ -32,9 +32,12 @@ def crop_region(image: np.ndarray, crop: Sequence[int] | None) -> np.ndarray:
     """``image[y:y+h, x:x+w]`` for ``crop`` = (x, y, w, h); the image itself for None."""
     if crop is None:
         return image
-    if len(crop) != 4:
-        raise InputError(f"crop must be (x, y, width, height), got {crop!r}")
-    x, y, w, h = (int(v) for v in crop)
+    values = list(crop) if isinstance(crop, Sequence | np.ndarray) else []
+    if len(values) != 4 or not all(
+        isinstance(v, int | np.integer) and not isinstance(v, bool) for v in values
+    ):
+        raise InputError(f"crop must be four integers (x, y, width, height), got {crop!r}")
+    x, y, w, h = (int(v) for v in values)
     if x < 0 or y < 0 or w <= 0 or h <= 0:
         raise InputError(f"crop must have a non-negative origin and a positive size, got {crop!r}")
     return image[y : y + h, x : x + w]
@@ -42,8 +45,8 @@ def crop_region(image: np.ndarray, crop: Sequence[int] | None) -> np.ndarray:
 
 def confusion(pred: np.ndarray, truth: np.ndarray) -> tuple[int, int, int]:
     """(true positives, false positives, false negatives) of two HxW masks."""
-    truth = as_mask(truth, name="truth")
-    pred = as_mask(pred, truth.shape, name="prediction")
+    truth = as_mask(truth, name="truth", binary=True)
+    pred = as_mask(pred, truth.shape, name="prediction", binary=True)
     tp = int(np.count_nonzero(pred & truth))
     fp = int(np.count_nonzero(pred)) - tp
     fn = int(np.count_nonzero(truth)) - tp
@@ -56,7 +59,7 @@ def _div(a: float, b: float) -> float:
 
 def f_beta(precision: float, recall: float, beta: float) -> float:
     """F_beta from precision and recall (0 where both are 0)."""
-    if beta <= 0:
+    if not is_real(beta) or not 0 < beta < float("inf"):
         raise InputError(f"beta must be positive, got {beta}")
     b2 = beta * beta
     return _div((1 + b2) * precision * recall, b2 * precision + recall)
@@ -64,7 +67,7 @@ def f_beta(precision: float, recall: float, beta: float) -> float:
 
 def f_beta_counts(tp: float, fp: float, fn: float, beta: float) -> float:
     """F_beta from counts as published: NaN only when TP = FP = FN = 0."""
-    if beta <= 0:
+    if not is_real(beta) or not 0 < beta < float("inf"):
         raise InputError(f"beta must be positive, got {beta}")
     b2 = beta * beta
     den = (1 + b2) * tp + b2 * fn + fp
@@ -108,8 +111,8 @@ def score_mask(
     crop: Sequence[int] | None = None,
 ) -> MaskScores:
     """Precision, recall, IoU and F_beta of one prediction (module docstring)."""
-    truth = as_mask(truth, name="truth")
-    pred = as_mask(pred, truth.shape, name="prediction")
+    truth = as_mask(truth, name="truth", binary=True)
+    pred = as_mask(pred, truth.shape, name="prediction", binary=True)
     tp, fp, fn = confusion(crop_region(pred, crop), crop_region(truth, crop))
     p, r, j = scores_from_counts(tp, fp, fn)
     return MaskScores(p, r, j, {b: f_beta_counts(tp, fp, fn, b) for b in betas})

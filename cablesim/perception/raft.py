@@ -18,6 +18,7 @@ weights for this architecture are installable offline: train or convert your own
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass, fields
 from functools import lru_cache
 from pathlib import Path
@@ -223,15 +224,25 @@ def save_raft_checkpoint(
     return path
 
 
-def load_raft(path: str | Path, device: str = "cpu") -> Any:
-    """Load a checkpoint written by :func:`save_raft_checkpoint`; clear errors otherwise."""
-    torch = _torch()
+def check_checkpoint_file(path: str | Path) -> Path:
+    """``InputError`` unless ``path`` is a readable file (checked before torch is needed)."""
+    if path is None or str(path).strip() == "":
+        raise InputError("no RAFT checkpoint given (weights are never downloaded)")
     path = Path(path)
     if not path.is_file():
         raise InputError(
             f"RAFT checkpoint not found: {path} (weights are never downloaded; "
             "supply a checkpoint file)"
         )
+    if not os.access(path, os.R_OK):
+        raise InputError(f"RAFT checkpoint {path} is not readable")
+    return path
+
+
+def load_raft(path: str | Path, device: str = "cpu") -> Any:
+    """Load a checkpoint written by :func:`save_raft_checkpoint`; clear errors otherwise."""
+    path = check_checkpoint_file(path)
+    torch = _torch()
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - torch raises many kinds for corrupt files
@@ -275,7 +286,7 @@ class RaftFlow(FlowEstimator):
     def __init__(
         self, checkpoint: str | Path, device: str = "auto", iters: int | None = None
     ) -> None:
-        self.checkpoint = Path(checkpoint)
+        self.checkpoint = check_checkpoint_file(checkpoint)
         self.device = _device(device)
         self.model = load_raft(self.checkpoint, self.device)
         self.iters = iters

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_flow
+from cablesim.perception._checks import as_flow, check_params
 
 
 @dataclass(frozen=True)
@@ -22,6 +22,7 @@ class SegmentationParams:
     tau_v: float = 0.47  # relative vote threshold (SPEC beta = 0.4 row)
 
     def __post_init__(self) -> None:
+        check_params(self)
         if self.tau_m < 0:
             raise InputError(f"tau_m must be >= 0, got {self.tau_m}")
         if not 0 <= self.tau_v <= 1:

@@ -7,14 +7,52 @@ z up.  The board's front face is the plane x = ``board.x``; connectors stick out
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
-from cablesim.config import Config, check_positive, check_range
+from cablesim.config import (
+    Config,
+    check_fields,
+    check_number,
+    check_positive,
+    check_range,
+    check_vector,
+)
 from cablesim.errors import ConfigError
-from cablesim.panda.description import PARK_QPOS
+from cablesim.panda.description import JOINT_LIMITS, PARK_QPOS
 from cablesim.panda.visuals import check_visual
 
 BACKGROUNDS = ("wood", "bushes", "cables", "solid")
+
+# Sanity bounds that keep MuJoCo away from degenerate models (the table top is the box
+# x in [TABLE_X[0], TABLE_X[1]], |y| <= TABLE_HALF_WIDTH; see cablesim.sim.world).
+TABLE_X = (-0.6, 0.9)
+TABLE_HALF_WIDTH = 0.85
+BOARD_X = (-0.4, 0.9)  # the board's front face stays over the table
+HOSE_LENGTH = (0.1, 3.0)  # metres: a hose longer than 3 m does not fit on the table
+MAX_HOSE_VERTICES = 300  # per hose (length / segment_length)
+WORLD_LIMIT = 10.0  # metres: every configured position lies within +-10 m of the origin
+MIN_HOSE_VERTICES = 8
+
+
+def hose_vertex_count(length: float, segment_length: float) -> int:
+    """Vertices of a hose of ``length`` with edges of about ``segment_length`` (at least 8)."""
+    return max(MIN_HOSE_VERTICES, int(round(length / segment_length)) + 1)
+
+
+def min_vertex_spacing(lengths: tuple[float, float], segment_length: float) -> float:
+    """The smallest edge length of any hose with a length in ``lengths``: at the shortest
+    length, or just above a length where the vertex count steps up."""
+    lo, hi = float(lengths[0]), float(lengths[1])
+    points = [lo, hi]
+    k = max(0, int(lo / segment_length) - 1)
+    while (k + 0.5) * segment_length <= hi and len(points) < 2 * MAX_HOSE_VERTICES:
+        for x in ((k + 0.5) * segment_length * (1 + e) for e in (-1e-12, 0.0, 1e-12)):
+            if lo <= x <= hi:
+                points.append(x)
+        k += 1
+    return min(x / (hose_vertex_count(x, segment_length) - 1) for x in points)
+
 
 # Default connector layout on the board: (y, z) of each male connector, two rows of five.
 DEFAULT_CONNECTORS: tuple[tuple[float, float], ...] = tuple(
@@ -36,6 +74,7 @@ class BoardConfig:
     connector_length: float = 0.06  # how far a male connector sticks out of the board
 
     def validate(self) -> None:
+        check_fields(self, "board.")
         if self.background not in BACKGROUNDS:
             raise ConfigError(
                 "board.background",
@@ -43,6 +82,11 @@ class BoardConfig:
             )
         for name in ("width", "height", "thickness", "connector_length"):
             check_positive(f"board.{name}", getattr(self, name))
+        check_number("board.x", self.x, *BOARD_X)
+        check_number("board.width", self.width, hi=2 * TABLE_HALF_WIDTH)
+        check_number("board.height", self.height, hi=3.0)
+        check_number("board.thickness", self.thickness, hi=0.2)
+        check_number("board.connector_length", self.connector_length, hi=0.3)
         if len(self.solid_rgb) != 3 or not all(0 <= c <= 1 for c in self.solid_rgb):
             raise ConfigError(
                 "board.solid_rgb", f"expected three values in [0, 1], got {self.solid_rgb}"
@@ -84,18 +128,33 @@ class HoseConfig:
     friction: float = 0.9
 
     def validate(self) -> None:
+        check_fields(self, "hoses.")
         if not isinstance(self.count, int) or not 1 <= self.count <= 8:
             raise ConfigError("hoses.count", f"1 to 8 hoses are supported, got {self.count!r}")
-        check_range("hoses.length", self.length, lo=1e-9)
-        if self.length[0] <= 0:
-            raise ConfigError("hoses.length", f"lengths must be positive, got {self.length}")
+        check_range("hoses.length", self.length, *HOSE_LENGTH)
         check_positive("hoses.radius", self.radius)
+        check_number("hoses.radius", self.radius, hi=0.05)
         check_positive("hoses.segment_length", self.segment_length)
         if self.segment_length < 2 * self.radius:
             raise ConfigError(
                 "hoses.segment_length", f"{self.segment_length} is shorter than the hose diameter"
             )
-        check_range("hoses.young", self.young, lo=1e-9)
+        n = self.length[1] / self.segment_length
+        if n > MAX_HOSE_VERTICES:
+            raise ConfigError(
+                "hoses.segment_length",
+                f"{self.segment_length} m makes {n:.0f} vertices of a {self.length[1]} m hose "
+                f"(at most {MAX_HOSE_VERTICES})",
+            )
+        spacing = min_vertex_spacing(self.length, self.segment_length)
+        if spacing < 2 * self.radius * (1 + 1e-6):  # MuJoCo: spacing > diameter
+            raise ConfigError(
+                "hoses.length",
+                f"a hose of {self.length[0]} to {self.length[1]} m gets vertices {spacing:.4g} m "
+                f"apart, not more than its diameter {2 * self.radius:.4g} m (make the hoses longer, "
+                "the segments longer or the radius smaller)",
+            )
+        check_range("hoses.young", self.young, lo=1e-9, hi=1e12)
         if not 0 <= self.poisson < 0.5:
             raise ConfigError("hoses.poisson", f"must be in [0, 0.5), got {self.poisson}")
         check_positive("hoses.mass_per_metre", self.mass_per_metre)
@@ -104,6 +163,11 @@ class HoseConfig:
             raise ConfigError("hoses.both_ends_probability", "must be in [0, 1]")
         if not self.colors:
             raise ConfigError("hoses.colors", "need at least one colour")
+        for i, c in enumerate(self.colors):
+            for k, v in enumerate(check_vector(f"hoses.colors[{i}]", c, 3)):
+                check_number(f"hoses.colors[{i}][{k}]", v, 0.0, 1.0)
+        check_number("hoses.color_jitter", self.color_jitter, 0.0, 1.0)
+        check_positive("hoses.friction", self.friction, allow_zero=True)
 
 
 @dataclass
@@ -129,6 +193,7 @@ class CameraConfig:
     far: float = 5.0
 
     def validate(self) -> None:
+        check_fields(self, "camera.")
         if not (16 <= self.width <= 1280 and 16 <= self.height <= 720):
             raise ConfigError(
                 "camera.width/height",
@@ -141,6 +206,32 @@ class CameraConfig:
         check_positive("camera.depth_noise_std_per_m2", self.depth_noise_std_per_m2, True)
         if not 0 < self.near < self.far:
             raise ConfigError("camera.near", "need 0 < near < far")
+        pos = check_vector("camera.position", self.position, 3, WORLD_LIMIT)
+        look = check_vector("camera.look_at", self.look_at, 3, WORLD_LIMIT)
+        check_number("camera.position_jitter", self.position_jitter, hi=1.0)
+        check_number("camera.look_at_jitter", self.look_at_jitter, hi=1.0)
+        check_view("camera.look_at", pos, look, self.position_jitter + self.look_at_jitter)
+
+
+def check_view(field: str, position: tuple[float, ...], look_at: tuple[float, ...], jitter=0.0):
+    """A camera at ``position`` looking at ``look_at`` (each moved by up to ``jitter`` per
+    axis) has a view direction: the two points are apart and not one above the other (the
+    image's x axis is the view direction crossed with world z)."""
+    d = [b - a for a, b in zip(position, look_at, strict=True)]
+    norm = math.sqrt(sum(x * x for x in d))
+    margin = 2 * math.sqrt(3) * jitter
+    if not norm > max(margin, 1e-3):
+        raise ConfigError(
+            field,
+            f"{tuple(look_at)} is (within the jitter) the camera position {tuple(position)}",
+        )
+    horizontal = math.hypot(d[0], d[1])
+    if not horizontal > margin + 1e-3 * norm:
+        raise ConfigError(
+            field,
+            f"the camera looks straight up or down from {tuple(position)} to {tuple(look_at)} "
+            "(the image has no x axis)",
+        )
 
 
 @dataclass
@@ -164,10 +255,14 @@ class RobotConfig:
     visual: str = "primitive"
 
     def validate(self) -> None:
+        check_fields(self, "robot.")
         if len(self.base_position) != 3:
             raise ConfigError("robot.base_position", "expected (x, y, z)")
+        check_vector("robot.base_position", self.base_position, 3, WORLD_LIMIT)
         if len(self.park_qpos) != 7:
             raise ConfigError("robot.park_qpos", f"expected 7 joint angles, got {self.park_qpos}")
+        for i, (q, (lo, hi)) in enumerate(zip(self.park_qpos, JOINT_LIMITS, strict=True)):
+            check_number(f"robot.park_qpos[{i}]", q, float(lo), float(hi))
         if not isinstance(self.hand_board, bool):
             raise ConfigError("robot.hand_board", f"must be true or false, got {self.hand_board!r}")
         if self.hand_board and not self.enabled:
@@ -185,11 +280,14 @@ class PhysicsConfig:
     cache: bool = True  # cache the settled state per config (see cablesim.sim.settle)
 
     def validate(self) -> None:
+        check_fields(self, "physics.")
         if not 0 < self.timestep <= 0.016:
             raise ConfigError("physics.timestep", f"must be in (0, 0.016] s, got {self.timestep}")
         check_positive("physics.settle_speed", self.settle_speed)
         check_positive("physics.settle_max_time", self.settle_max_time)
         check_positive("physics.settle_check_every", self.settle_check_every)
+        check_number("physics.settle_max_time", self.settle_max_time, hi=600.0)
+        check_number("physics.gravity", self.gravity, -100.0, 100.0)
 
 
 @dataclass
@@ -204,6 +302,7 @@ class SceneConfig(Config):
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
 
     def validate(self) -> SceneConfig:
+        check_fields(self)
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
         self.board.validate()

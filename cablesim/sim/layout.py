@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cablesim.seeding import stream
-from cablesim.sim.config import SceneConfig
+from cablesim.sim.config import SceneConfig, hose_vertex_count
 
 FEMALE_LENGTH = 0.05  # the female coupling on a hose end (mesh length)
 FEMALE_OVERLAP = 0.014  # how far the coupling overlaps the male thread
@@ -89,7 +89,7 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
                 ends = (a, b)
         base = np.array(h.colors[int(colour_order[i % len(colour_order)])], float)
         rgb = np.clip(base + rng.uniform(-h.color_jitter, h.color_jitter, 3), 0, 1)
-        n_vert = max(8, int(round(lengths[i] / h.segment_length)) + 1)
+        n_vert = hose_vertex_count(float(lengths[i]), h.segment_length)
         specs.append(
             HoseSpec(
                 index=i,

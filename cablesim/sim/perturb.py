@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from cablesim.config import check_positive, check_range
+from cablesim.config import check_fields, check_positive, check_range, is_int
 from cablesim.errors import ConfigError
 
 
@@ -47,13 +47,19 @@ class PerturbConfig:
     max_force: float = 2.0  # N per vertex
 
     def __post_init__(self) -> None:
-        if self.hoses is not None:
-            self.hoses = tuple(int(h) for h in self.hoses)
-        self.span = tuple(self.span)  # type: ignore[assignment]
-        self.amplitude = tuple(self.amplitude)  # type: ignore[assignment]
-        self.period = tuple(self.period)  # type: ignore[assignment]
+        # from JSON: lists; anything that is not a sequence of numbers is named by validate()
+        if isinstance(self.hoses, list | tuple):
+            self.hoses = tuple(int(h) if is_int(h) else h for h in self.hoses)
+        for name in ("span", "amplitude", "period"):
+            value = getattr(self, name)
+            if not isinstance(value, tuple | str):
+                try:
+                    setattr(self, name, tuple(value))
+                except TypeError:
+                    pass
 
     def validate(self) -> PerturbConfig:
+        check_fields(self, "perturb.")
         if not isinstance(self.points, int) or self.points < 1:
             raise ConfigError("perturb.points", f"must be an integer >= 1, got {self.points!r}")
         check_range("perturb.span", self.span, 0.0, 1.0)

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from cablesim.camera.base import CameraImage
-from cablesim.config import Config
+from cablesim.config import Config, check_fields
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.runner import InteractionResult
 from cablesim.episode.session import Session
@@ -49,6 +49,7 @@ class EpisodeConfig(Config):
     progress: bool = False  # print progress lines
 
     def validate(self) -> EpisodeConfig:
+        check_fields(self)
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
         if self.hose is not None and (
@@ -159,6 +160,8 @@ def simulate_episode(
     as they come (see :mod:`cablesim.recording`)."""
     from cablesim.recording import RecordingWriter
 
+    if record_to is not None:  # before the scene is built
+        RecordingWriter.check_target(record_to, overwrite)
     say: Say = Progress("episode") if config.progress else quiet
     session = SimSession.build(config)
     cfg = session.cfg

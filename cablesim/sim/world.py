@@ -229,7 +229,10 @@ class World:
         cfg = (cfg or SceneConfig()).validate()
         hose_specs = sample_hoses(cfg)
         cam = sample_camera(cfg)
-        spec = mujoco.MjSpec.from_string(_scene_xml(cfg, hose_specs, cam))
+        try:
+            spec = mujoco.MjSpec.from_string(_scene_xml(cfg, hose_specs, cam))
+        except (ValueError, mujoco.FatalError) as e:  # names the failing part for the user
+            raise PhysicsDivergedError(f"the scene failed to compile: {e}") from e
         panda = panda_base = None
         if cfg.robot.enabled:
             from cablesim.panda.model import attach_panda
@@ -266,7 +269,10 @@ class World:
             hoses.append(Hose(s, fid, adr, num, bodies, start, eq))
         _damp_hoses(model, hoses, cfg.hoses.damping)
         world = cls(cfg, spec, model, hoses, cam, panda, panda_base)
-        world._set_start_shapes()
+        try:
+            world._set_start_shapes()
+        except mujoco.FatalError as e:
+            raise PhysicsDivergedError(f"the scene's start state failed: {e}") from e
         if settle:
             from cablesim.sim.settle import settle_world
 
@@ -309,18 +315,21 @@ class World:
         """Advance ``n`` physics steps, running the step hooks around each; raise
         ``PhysicsDivergedError`` if the physics blew up."""
         m, d = self.model, self.data
-        if not (self.before_step or self.after_step):
+        try:
+            if not (self.before_step or self.after_step):
+                for _ in range(n):
+                    mujoco.mj_step(m, d)
+                self.check_diverged()
+                return
             for _ in range(n):
+                for hook in tuple(self.before_step):
+                    hook(self)
                 mujoco.mj_step(m, d)
-            self.check_diverged()
-            return
-        for _ in range(n):
-            for hook in tuple(self.before_step):
-                hook(self)
-            mujoco.mj_step(m, d)
-            self.check_diverged()
-            for hook in tuple(self.after_step):
-                hook(self)
+                self.check_diverged()
+                for hook in tuple(self.after_step):
+                    hook(self)
+        except mujoco.FatalError as e:  # e.g. out of memory for contacts
+            raise PhysicsDivergedError(f"MuJoCo stopped at t={d.time:.3f}s: {e}") from e
 
     @contextmanager
     def hooks(
