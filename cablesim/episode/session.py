@@ -31,6 +31,7 @@ class Session:
     cfg: Any
     truth: Any = None  # a TruthProvider (simulation, digital twin) or None (real robot)
     hose: int | None = None  # the hose of interest, when known
+    retry_rng: np.random.Generator | None = None  # side of the first grasp retry (grasp_at)
 
     @property
     def T_world_camera(self) -> np.ndarray:
@@ -68,6 +69,7 @@ class Session:
             say=say,
             hose=self.hose,
             park=self.park,
+            retry_rng=self.retry_rng,
         )
 
     def stop(self) -> None:
