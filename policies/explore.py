@@ -495,7 +495,7 @@ def explore(
     """Run one simulated exploration (see the module docstring); with ``out`` write pictures, a
     video and ``metrics.json`` there (:mod:`cablesim.policies.report`); with ``record_to``
     record every interaction's stream there."""
-    from cablesim.errors import SceneError
+    from cablesim.errors import PhysicsDivergedError, SceneError
     from cablesim.sim.session import SimSession
 
     from .report import ExplorationWriter
@@ -505,7 +505,7 @@ def explore(
     t_start = time.perf_counter()
     try:
         session = SimSession.build(cfg.episode_config())
-    except SceneError as e:  # no scene draw served: a named outcome, written, not raised
+    except (SceneError, PhysicsDivergedError) as e:  # a named outcome, written, not raised
         say(f"no start segment: {e.outcome}: {e}")
         failed = ExplorationResult(cfg, cfg.hose, None, None)  # type: ignore[arg-type]
         failed.start_outcome, failed.stop_reason = e.outcome, f"{e.outcome}: {e}"

@@ -17,6 +17,7 @@ returns a :class:`PrimitiveResult` that is falsy and says why.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -141,6 +142,47 @@ def check_interaction(
                 ok, why = robot.check_reachable(g.translated(s * cfg.actions.amplitude * u))
                 if not ok:
                     return False, f"action {label} end point: {why}"
+    return True, ""
+
+
+def plan_interaction(
+    robot: Robot,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    cfg: InteractionConfig,
+    T_world_camera: np.ndarray,
+    approach: Sequence[float] = DEFAULT_APPROACH,
+) -> tuple[bool, str]:
+    """Whether the interaction's motions plan, without moving: the grasp approach (retract,
+    stand-off, straight lines in) and one period of every action, stroke by stroke, on a
+    :class:`~cablesim.robot.dry_run.DryRunRobot` of ``robot`` (its arm model, from its current
+    joints; IK along each line, limits, collisions, branch jumps).  Stricter than
+    :func:`check_interaction`, which checks the end poses one by one: an end point can be
+    reachable while the line to it from the grasp configuration is not (measured: "IK did not
+    converge at 100% of the line" on the first stroke).  Robots without an arm model get
+    :func:`check_interaction`."""
+    from cablesim.robot.dry_run import DryRunRobot
+
+    ok, why = check_interaction(robot, centre, axis, cfg, T_world_camera, approach)
+    if not ok or not hasattr(robot, "arm"):
+        return ok, why
+    dry = DryRunRobot(robot)
+    grasp_cfg = dataclasses.replace(cfg.grasp, retries=0)
+    if cfg.kind == "push":
+        g = approach_for_push(dry, centre, axis, grasp_cfg, approach)
+        directions = [("push", np.asarray(approach, float))]
+    else:
+        g = grasp_at(dry, centre, axis, grasp_cfg, approach)
+        directions = action_directions(cfg.actions, axis, T_world_camera, approach)
+    if not g or g.pose is None:
+        return False, f"planned {g.reason}"
+    a = cfg.actions
+    for label, u in directions:
+        depth = cfg.push_depth if cfg.kind == "push" else a.amplitude
+        way = periodic_waypoints(g.pose, u, depth, 1, one_sided=cfg.kind == "push")
+        r = _run_waypoints(dry, way, a.speed, f"planned action {label}")
+        if not r:
+            return False, r.reason
     return True, ""
 
 

@@ -17,7 +17,9 @@ centimetres of it (connected to it), and accepts the first candidate that
   (:func:`gripper_obstruction`; measured: a finger that lands on a neighbouring hose in front
   pushes the hose of interest out of the grasp),
 - is graspable: the grasp and pre-grasp poses and the action end points
-  (g1 +- D for every configured direction) pass ``robot.check_reachable``.
+  (g1 +- D for every configured direction) pass ``robot.check_reachable``, and the motions
+  themselves plan on the arm model (approach and one period of each action,
+  :func:`~cablesim.episode.primitives.plan_interaction`).
 
 Before any of these checks, the visible pixels of the hose are screened cheaply (the
 same rules, necessary conditions only): a pixel closer than ``clearance`` to another hose or
@@ -151,9 +153,14 @@ def pick_segment(
         if gripper_obstruction(world, hose, g_centre, axis, approach, cfg, arc):
             reasons["no room for the gripper"] += 1
             continue
-        ok, why = prim.check_interaction(robot, g_centre, axis, cfg, T, approach)
+        ok, why = prim.plan_interaction(robot, g_centre, axis, cfg, T, approach)
         if not ok:
-            reasons["action end points unreachable" if "end point" in why else "unreachable"] += 1
+            if "end point" in why:
+                reasons["action end points unreachable"] += 1
+            elif why.startswith("planned"):
+                reasons["motions do not plan"] += 1
+            else:
+                reasons["unreachable"] += 1
             continue
         return PickedSegment(seg, hose, (u, v), centre, tries)
     tried = ", ".join(f"{n}x {r}" for r, n in reasons.most_common()) or "none"

@@ -67,6 +67,7 @@ from cablesim.episode.session import Session
 from cablesim.errors import (
     ConfigError,
     NoGraspableSegmentError,
+    PhysicsDivergedError,
     SceneError,
     SceneUnsettledError,
 )
@@ -323,13 +324,15 @@ def simulate_episode(
     """Build the session of ``config``, pick a start segment of ``config.hose`` (drawn when
     None) and run the interaction.  With ``record_to`` the frames are written to that directory
     as they come (see :mod:`cablesim.recording`).  A scene no draw of which serves (module
-    docstring) comes back as a failed result with its named ``outcome``, not as an error."""
+    docstring), or whose physics diverged while settling, comes back as a failed result with
+    its named ``outcome`` (``scene_unsettled``, ``no_graspable_segment``, ``diverged``), not as
+    an error."""
     from cablesim.recording import RecordingWriter
 
     say: Say = Progress("episode") if config.progress else quiet
     try:
         session = SimSession.build(config)
-    except SceneError as e:
+    except (SceneError, PhysicsDivergedError) as e:
         say(f"no interaction: {e.outcome}: {e}")
         draws = {
             "draw": None,
