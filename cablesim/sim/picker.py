@@ -21,11 +21,14 @@ centimetres of it (connected to it), and accepts the first candidate that
   themselves plan on the arm model (approach and one period of each action,
   :func:`~cablesim.episode.primitives.plan_interaction`).
 
-Before any of these checks, the visible pixels of the hose are screened cheaply (the
-same rules, necessary conditions only): a pixel closer than ``clearance`` to another hose or
-the robot, whose nearest rod point (in the image) lies within ``min_end_distance`` of a hose
-end, or where the rod runs more than ``max_out_of_plane_deg`` out of the image plane is not
-drawn.  So the ``max_tries`` full checks (IK included) go to pixels that can pass.
+Candidates come in the seeded random order of all visible pixels of the hose, but pixels that
+cannot pass are skipped without counting as tries (a cheap screening, with margins so that it
+turns down only what the full checks would): a pixel within ``clearance`` of another hose or
+the robot, whose own point on the rod (from depth) lies within ``min_end_distance`` of a hose
+end (less ``half_length`` and a centimetre), or where the rod runs more than
+``max_out_of_plane_deg`` + 25 degrees out of the image plane.  So the ``max_tries`` full checks
+(IK and motion planning included) go to pixels that can pass, and a pixel the checks accept is
+the same one an unscreened draw would reach first.
 
 It raises :class:`~cablesim.errors.NoGraspableSegmentError` (an ``UnreachableError``) with the
 reasons, counted, when no candidate passes; the session then tries another hose or draws
@@ -105,17 +108,15 @@ def pick_segment(
     verts = world.hose_vertices(hose)
     lengths = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(verts, axis=0), axis=1))])
     approach = np.asarray(prim.DEFAULT_APPROACH)
-    screened, pool, clear_px = _screen(
+    screened, passes = _screen(
         uu, vv, depth, K, T, others, verts, lengths, clearance, min_end_distance,
-        max_out_of_plane_deg,
+        half_length, max_out_of_plane_deg,
     )  # fmt: skip
+    pool = np.count_nonzero(passes)
     reasons: Counter[str] = Counter()
-    # pixels clear of the others by a whole segment's reach first, then the rest
-    z = depth[vv[pool], uu[pool]].astype(float)
-    wide = clear_px[pool] > (clearance + half_length) * K.f / z
-    first, rest = pool[wide], pool[~wide]
-    order = np.concatenate([first[rng.permutation(len(first))], rest[rng.permutation(len(rest))]])
-    order = order[:max_tries]
+    # a random order of all visible pixels (the seeded draw), the screened-out ones skipped
+    perm = rng.permutation(len(vv))
+    order = perm[passes[perm]][:max_tries]
     for tries, j in enumerate(order, 1):
         u, v = int(uu[j]), int(vv[j])
         px_per_m = K.f / float(depth[v, u])
@@ -167,7 +168,7 @@ def pick_segment(
     screen = ", ".join(f"{n} {r}" for r, n in screened.most_common()) or "none"
     raise NoGraspableSegmentError(
         f"no graspable visible segment of hose {hose}: of its {len(vv)} visible pixels "
-        f"{len(pool)} passed the screening (turned down: {screen}); {len(order)} tried "
+        f"{pool} passed the screening (turned down: {screen}); {len(order)} tried "
         f"({tried})",
         reasons + Counter({f"screened: {r}": n for r, n in screened.items()}),
     )
@@ -184,20 +185,23 @@ def _screen(
     lengths: np.ndarray,
     clearance: float,
     min_end_distance: float,
+    half_length: float,
     max_out_of_plane_deg: float,
-) -> tuple[Counter[str], np.ndarray, np.ndarray]:
-    """Indices of the visible pixels that can pass the picker's rules (necessary conditions,
-    cheap), counted why the others cannot, and each pixel's distance (px) to the nearest pixel
-    of another hose or the robot."""
+) -> tuple[Counter[str], np.ndarray]:
+    """Which visible pixels can pass the picker's rules (bool per pixel; conditions the full
+    checks imply, with margins, so that screening skips only pixels that would fail) and,
+    counted, why the others cannot."""
     why: Counter[str] = Counter()
     z = depth[vv, uu].astype(float)
     # clearance: the centre pixel itself must be clear of other hoses and the robot
+    # the segment contains its centre pixel and is dilated by n steps of the 4-neighbourhood
+    # (a taxicab ball): another pixel within n steps of the centre fails the clearance check
     dist = (
-        ndimage.distance_transform_edt(~others)[vv, uu]
+        ndimage.distance_transform_cdt(~others, metric="taxicab")[vv, uu]
         if others.any()
-        else np.full(len(vv), np.inf)
+        else np.full(len(vv), np.iinfo(np.int32).max)
     )
-    clear = dist > clearance * K.f / z
+    clear = dist > np.maximum(1, np.round(clearance * K.f / z))
     why["near another hose or the robot"] = int((~clear).sum())
     # each pixel's 3D point (camera frame) and the nearest point of the rod: its arc length
     # and how far the rod leaves the image plane there
@@ -214,15 +218,16 @@ def _screen(
         e = np.argmin(d, axis=1)
         edge[c : c + 2048] = e
         arc[c : c + 2048] = lengths[e] + t[np.arange(len(e)), e] * seg_len[e]
-    # a segment's centre lies within about a hose radius of its centre pixel's rod point
-    slack = 0.01
+    # the segment's centre (the median of up to half_length around the pixel) lies within
+    # half_length and a hose radius of its centre pixel's rod point
+    slack = half_length + 0.01
     inner = (arc >= min_end_distance - slack) & (arc <= lengths[-1] - min_end_distance + slack)
     why["too close to a hose end"] = int((clear & ~inner).sum())
     tangent = ab / np.maximum(seg_len[:, None], 1e-12)
     out_deg = np.degrees(np.arcsin(np.minimum(1.0, np.abs(tangent[:, 2]))))
-    flat = out_deg[edge] <= max_out_of_plane_deg + 10.0  # the rod, not the depth estimate
+    flat = out_deg[edge] <= max_out_of_plane_deg + 25.0  # the rod, not the depth estimate
     why["axis out of the image plane"] = int((clear & inner & ~flat).sum())
-    return +why, np.nonzero(clear & inner & flat)[0], dist
+    return +why, clear & inner & flat
 
 
 # The open Panda gripper in the grasp frame (x along the hose, y across it where the fingers
