@@ -242,3 +242,37 @@ def test_a_grasp_that_does_not_hold_is_retried_and_counted(ground_truth: bool) -
         assert not (session.camera.render_labels() == LABEL_ROBOT).any()  # out of view again
     finally:
         session.close()
+
+
+def test_no_room_for_the_gripper_where_another_hose_passes_in_front() -> None:
+    """Grasping the rear hose where the other passes in front of it, a finger would land on
+    the front hose (measured: it pushed the hose of interest out of the grasp); further along
+    the rear hose there is room."""
+    from cablesim.sim.picker import _densify, gripper_obstruction
+    from cablesim.sim.world import World
+
+    scene = small(SEED_REDRAWN).scene_config().replace(draw=1)  # its two hoses cross
+    scene.robot.enabled = False
+    world = World.build(scene)
+    a, b = (_densify(world.hose_vertices(i), 0.005) for i in (0, 1))
+    d = np.linalg.norm(a[:, None] - b[None], axis=2)
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    rear, front = (0, 1) if a[i, 0] > b[j, 0] else (1, 0)  # x grows towards the board
+    pts = a if rear == 0 else b
+    k = i if rear == 0 else j
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    icfg = InteractionConfig()
+
+    def obstruction(n: int) -> str:
+        axis = pts[min(n + 1, len(pts) - 1)] - pts[max(n - 1, 0)]
+        return gripper_obstruction(world, rear, pts[n], axis, (1.0, 0.0, 0.0), icfg, arc[n])
+
+    assert f"would touch hose {front}" in obstruction(k)
+    other = b if rear == 0 else a
+    clear = [
+        n
+        for n in range(len(pts))
+        if np.linalg.norm(other - pts[n], axis=1).min() > 0.25 and 0.1 < arc[n] < arc[-1] - 0.1
+    ]
+    assert clear, "no part of the rear hose far from the front one"
+    assert obstruction(clear[len(clear) // 2]) == ""
