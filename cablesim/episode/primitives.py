@@ -201,16 +201,18 @@ def _to_pose_via_retract(
     approach axis and a straight line covers the rest: a joint motion that ends right in front
     of the board can sweep the hand sideways through the hanging hoses (measured: it dragged
     the hose of interest 11 cm off its grasp point); one that ends further back does not.  When
-    the stand-off pose is out of reach or its line is blocked, the joint motion goes straight
-    to ``pose``."""
+    the stand-off pose is out of reach, half the stand-off is tried; when that is out of reach
+    too or its line is blocked, the joint motion goes straight to ``pose``."""
     q = robot.solve_ik(pose)
     if q is None:
         return MoveResult(False, "no IK solution")
     q_stage = None
-    if standoff > 0:
-        stage = pose.translated(-standoff * pose.rotation[:, 2])
+    for back in (standoff, standoff / 2) if standoff > 0 else ():
+        stage = pose.translated(-back * pose.rotation[:, 2])
         if robot.check_reachable(stage)[0]:
             q_stage = robot.solve_ik(stage)
+            if q_stage is not None:
+                break
     r = move_joints_safely(robot, RETRACT_QPOS, speed_factor)
     if not r:
         return MoveResult(False, f"could not retract first: {r.reason}")
