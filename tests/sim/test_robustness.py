@@ -276,3 +276,17 @@ def test_no_room_for_the_gripper_where_another_hose_passes_in_front() -> None:
     ]
     assert clear, "no part of the rear hose far from the front one"
     assert obstruction(clear[len(clear) // 2]) == ""
+
+
+def test_draw_on_the_command_line() -> None:
+    import argparse
+
+    from cablesim.commands import episode
+    from cablesim.errors import ConfigError
+
+    p = argparse.ArgumentParser()
+    episode.add_arguments(p)
+    cfg = episode.config_from_args(p.parse_args(["--seed", "210", "--draw", "1", "--out", "x"]))
+    assert cfg.scene_config().draw == 1 and cfg.seed == 210
+    with pytest.raises(ConfigError, match="draw"):
+        episode.config_from_args(p.parse_args(["--draw", "-1", "--out", "x"]))
