@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 import cablesim  # noqa: F401  (headless GL before mujoco)
+from cablesim.errors import outcome_of
 from cablesim.perception.metrics import score_mask
 from cablesim.perception.pipeline import compute_statistics, masks_from_statistics
 from cablesim.perception.votes import vote_image
@@ -32,13 +33,22 @@ METHODS = ("correlation", "segmentation")
 
 
 def run_seed(seed: int, perturb: bool, flow: str) -> dict:
+    """One seed's row; a failure of any kind is recorded by its named outcome, not raised, so
+    that the run goes on with the next seed."""
+    try:
+        return _run_seed(seed, perturb, flow)
+    except Exception as e:
+        return {"seed": seed, "perturb": perturb, "error": f"{outcome_of(e)}: {e}"}
+
+
+def _run_seed(seed: int, perturb: bool, flow: str) -> dict:
     session = SimSession.build(EpisodeConfig(seed=seed, perturb=PerturbConfig(enabled=perturb)))
     try:
         seg = session.pick_start()
         hose = session.hose
         res = session.interact(seg.mask)
         if not res.success:
-            return {"seed": seed, "perturb": perturb, "error": res.reason}
+            return {"seed": seed, "perturb": perturb, "error": f"{res.outcome}: {res.reason}"}
         stream = res.stream
         truth = stream.target.truth.labels == hose
         stats = compute_statistics(stream, flow, methods=METHODS)

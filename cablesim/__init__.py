@@ -10,8 +10,11 @@ from cablesim.errors import (
     CablesimError,
     ConfigError,
     InputError,
+    NoGraspableSegmentError,
     PhysicsDivergedError,
     RecordingError,
+    SceneError,
+    SceneUnsettledError,
     UnreachableError,
 )
 
@@ -23,8 +26,11 @@ __all__ = [
     "CablesimError",
     "ConfigError",
     "InputError",
+    "NoGraspableSegmentError",
     "PhysicsDivergedError",
     "RecordingError",
+    "SceneError",
+    "SceneUnsettledError",
     "UnreachableError",
     "__version__",
 ]

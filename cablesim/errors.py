@@ -20,6 +20,8 @@ class InputError(CablesimError, ValueError):
 class PhysicsDivergedError(CablesimError, RuntimeError):
     """The simulation produced NaN/inf or MuJoCo reported an instability."""
 
+    outcome = "diverged"
+
 
 class UnreachableError(CablesimError, RuntimeError):
     """A pose the robot cannot reach (IK failure, joint limits, collision)."""
@@ -32,3 +34,38 @@ class RecordingError(CablesimError, IOError):
 class CalibrationError(CablesimError, ValueError):
     """A calibration file that is missing, unreadable or lacks a valid field (the message names
     the file and the field), or a calibration that could not be computed."""
+
+
+class SceneError(CablesimError, RuntimeError):
+    """A simulated scene that cannot give an experiment what it needs.  ``outcome`` is the
+    name under which a run records it (``InteractionResult.outcome``)."""
+
+    outcome = "scene_error"
+
+
+class SceneUnsettledError(SceneError):
+    """The scene did not come to rest within the settle time (no divergence: its hoses still
+    creep or chatter faster than ``physics.settle_speed``)."""
+
+    outcome = "scene_unsettled"
+
+    def __init__(self, message: str, speed: float = float("nan"), limit: float = float("nan")):
+        self.speed, self.limit = speed, limit
+        super().__init__(message)
+
+
+class NoGraspableSegmentError(SceneError, UnreachableError):
+    """The hose of interest shows no visible, reachable, graspable segment; ``reasons`` counts
+    why the candidates were turned down."""
+
+    outcome = "no_graspable_segment"
+
+    def __init__(self, message: str, reasons: dict[str, int] | None = None):
+        self.reasons = dict(reasons or {})
+        super().__init__(message)
+
+
+def outcome_of(error: BaseException) -> str:
+    """The named outcome a run records for ``error``: the error's own ``outcome`` (scene
+    errors, ``diverged``), else ``error:<ErrorType>``."""
+    return getattr(error, "outcome", None) or f"error:{type(error).__name__}"

@@ -2,6 +2,7 @@
 
     rng = stream(seed, "episode")            # a numpy Generator
     rngs = streams(seed)                     # every named stream at once
+    rng = stream(seed, "scene_resample", 2)  # numbered child 2 of a stream (the 2nd re-draw)
 
 Each name is a child of ``SeedSequence(seed)`` with a fixed spawn key (its index in
 :data:`STREAMS`), so adding a use of one stream never changes the numbers another draws, and
@@ -37,12 +38,19 @@ def _check_seed(seed: int) -> int:
     return int(seed)
 
 
-def stream(seed: int, name: str) -> np.random.Generator:
-    """The generator of stream ``name`` for ``seed``."""
+def stream(seed: int, name: str, *index: int) -> np.random.Generator:
+    """The generator of stream ``name`` for ``seed``; with ``index``, its numbered child
+    (spawn key ``(position of name, *index)``): independent of the stream itself and of every
+    other child, e.g. one per re-draw of a scene."""
     if name not in STREAMS:
         raise ConfigError("seeding", f"unknown random stream {name!r}; known: {STREAMS}")
-    seq = np.random.SeedSequence(_check_seed(seed), spawn_key=(STREAMS.index(name),))
-    return np.random.default_rng(seq)
+    for i in index:
+        if isinstance(i, bool) or not isinstance(i, int | np.integer) or i < 0:
+            raise ConfigError(
+                "seeding", f"a stream index must be a non-negative integer, got {i!r}"
+            )
+    key = (STREAMS.index(name), *(int(i) for i in index))
+    return np.random.default_rng(np.random.SeedSequence(_check_seed(seed), spawn_key=key))
 
 
 def streams(seed: int, names: tuple[str, ...] = STREAMS) -> dict[str, np.random.Generator]:

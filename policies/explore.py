@@ -74,11 +74,13 @@ class Interaction:
     flow_example: tuple[np.ndarray, np.ndarray] | None = None  # (estimated, ground truth)
     timings: dict[str, float] = field(default_factory=dict)
     episode: dict[str, Any] = field(default_factory=dict)
+    outcome: str = ""  # named outcome (cablesim.episode.runner.OUTCOMES)
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "index": self.index,
             "success": self.success,
+            "outcome": self.outcome,
             "reason": self.reason,
             "source": self.source,
             "grade": self.grade,
@@ -102,6 +104,9 @@ class ExplorationResult:
     final_rgb: np.ndarray | None = None
     final_truth: np.ndarray | None = None
     stop_reason: str = ""
+    # named outcome of a start that never came to an interaction (no scene draw served)
+    start_outcome: str = ""
+    scene_draws: dict[str, Any] = field(default_factory=dict)
     perturbations: list[dict[str, Any]] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     # SPEC section 7 grades of every proposal: the executed ones and those the robot's
@@ -120,6 +125,16 @@ class ExplorationResult:
         ok = self.successes
         return ok[-1].merged if ok else {}
 
+    @property
+    def outcome(self) -> str:
+        """``ok`` when an interaction succeeded, else the named outcome of the start (no scene
+        draw served) or of the first interaction."""
+        if self.successes:
+            return "ok"
+        if self.start_outcome:
+            return self.start_outcome
+        return self.interactions[0].outcome if self.interactions else ""
+
     def metrics(self) -> dict[str, Any]:
         out: dict[str, Any] = {
             "seed": self.config.seed,
@@ -135,6 +150,8 @@ class ExplorationResult:
             "proposal_grades": dict(sorted(self.proposal_grades.items())),
             "merged": self.merged,
             "stop_reason": self.stop_reason,
+            "outcome": self.outcome,
+            "scene_draws": self.scene_draws,
             "perturbations": self.perturbations,
             "timings_s": self.timings,
             "config": to_dict(self.config),
@@ -177,6 +194,8 @@ class ExplorationResult:
             grades = ", ".join(f"{k} {v}" for k, v in sorted(self.proposal_grades.items()))
             lines.append(f"proposals graded: {grades}")
         lines.append(f"stopped: {self.stop_reason}")
+        if not self.successes:
+            lines.append(f"outcome: {self.outcome}")
         return "\n".join(lines)
 
 
@@ -343,8 +362,10 @@ class Exploration:
         t0 = time.perf_counter()
         ep = self._interact(k)
         inter = Interaction(k, ep.success, ep.reason, self.source, self.segment, grade)
+        inter.outcome = ep.outcome
         inter.timings["episode"] = time.perf_counter() - t0
         inter.episode = {
+            "grasp_retries": ep.grasp_retries,
             "actions": [a.to_dict() for a in ep.actions],
             "other_hoses_max_displacement_m": ep.other_hose_displacement(),
             "details": jsonable(ep.details),
@@ -494,6 +515,7 @@ def explore(
     """Run one simulated exploration (see the module docstring); with ``out`` write pictures, a
     video and ``metrics.json`` there (:mod:`cablesim.policies.report`); with ``record_to``
     record every interaction's stream there."""
+    from cablesim.errors import PhysicsDivergedError, SceneError
     from cablesim.sim.session import SimSession
 
     from .report import ExplorationWriter
@@ -505,7 +527,19 @@ def explore(
         check_checkpoint_file((flow_kwargs or {}).get("checkpoint"))
     say = progress or Progress("explore", cfg.progress)
     t_start = time.perf_counter()
-    session = SimSession.build(cfg.episode_config())
+    try:
+        session = SimSession.build(cfg.episode_config())
+    except (SceneError, PhysicsDivergedError) as e:  # a named outcome, written, not raised
+        say(f"no start segment: {e.outcome}: {e}")
+        failed = ExplorationResult(cfg, cfg.hose, None, None)  # type: ignore[arg-type]
+        failed.start_outcome, failed.stop_reason = e.outcome, f"{e.outcome}: {e}"
+        failed.scene_draws = {"turned_down": getattr(e, "resamples", [])}
+        failed.timings["total"] = time.perf_counter() - t_start
+        if out is not None:
+            writer = ExplorationWriter(Path(out), cfg)
+            writer.finish(failed)
+            writer.close()
+        return failed
     writer = ExplorationWriter(Path(out), cfg) if out is not None else None
     w, h = session.camera.width, session.camera.height
     try:
@@ -531,6 +565,7 @@ def explore(
             None if record_to is None else Path(record_to),
         )
         run.result.timings["build"] = session.build_time
+        run.result.scene_draws = session.describe_draws()
         result = run.run()
         result.perturbations = list(session.perturbation.log)
         result.timings["total"] = time.perf_counter() - t_start

@@ -63,6 +63,13 @@ def check_settle_cache(scene: SceneConfig) -> None:
 
 def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed") -> None:
     p.add_argument("--seed", type=int, default=0, help=f"{seed_help} (default 0)")
+    p.add_argument(
+        "--draw",
+        type=int,
+        default=None,
+        help="draw of the seed's scene (default 0, its own layout; a simulated session re-draws "
+        "when a draw does not settle or has no suitable hose, and records which draw served)",
+    )
     p.add_argument("--hoses", type=int, default=None, help="number of hoses (default 4)")
     p.add_argument("--width", type=int, default=None, help="image width (default 640)")
     p.add_argument("--height", type=int, default=None, help="image height (default 480)")
@@ -82,6 +89,8 @@ def add_interaction_arguments(p: argparse.ArgumentParser) -> None:
 def apply_scene_arguments(scene: SceneConfig, args: argparse.Namespace) -> SceneConfig:
     """``scene`` with the scene arguments that were given (in place; returned)."""
     scene.seed = args.seed
+    if getattr(args, "draw", None) is not None:
+        scene.draw = args.draw
     if args.hoses is not None:
         scene.hoses.count = args.hoses
     if getattr(args, "width", None) is not None:

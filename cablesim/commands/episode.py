@@ -9,8 +9,10 @@ Files in --out:
                      its ground-truth grasped-hose mask (titled tiles)
   start.png, target.png  the camera's images
   target_labels.png  the target frame's labels with a key
-  summary.json       config, result (gain per action, other hoses' displacement, frames kept,
-                     timings); also printed
+  summary.json       config (with the scene draw that served), named outcome, scene draws,
+                     result (gain per action, other hoses' displacement, frames kept, grasp
+                     retries, timings); also printed.  A seed no scene draw of which serves
+                     (scene_unsettled, no_graspable_segment) writes only this file.
 """
 
 from __future__ import annotations
@@ -96,16 +98,19 @@ def run(args: argparse.Namespace) -> int:
     try:
         res = ep.result
         summary = {
-            "config": cfg.to_dict(),
-            "segment_px": int(ep.segment.mask.sum()),
-            "scene_build_s": ep.build_time,
+            "config": (ep.session.cfg if ep.session is not None else cfg).to_dict(),
+            "outcome": res.outcome,
+            "segment_px": None if ep.segment is None else int(ep.segment.mask.sum()),
+            "scene_build_s": None if ep.session is None else ep.build_time,
+            "scene_draws": ep.draws,
             "result": res.to_dict(),
         }
-        if res.success and res.stream is not None:
+        if ep.start_image is not None:
+            write_png(out / "start.png", ep.start_image.rgb)
+        if res.success and res.stream is not None and ep.start_image is not None:
             start_img = ep.start_image.rgb
             sheet = contact_sheet(start_img, ep.segment.mask, res.stream)
             write_png(out / "contact_sheet.png", sheet)
-            write_png(out / "start.png", start_img)
             write_png(out / "target.png", res.stream.target.rgb)
             t = res.stream.target.truth
             if t is not None:

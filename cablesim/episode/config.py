@@ -28,6 +28,10 @@ class GraspConfig:
     """Pre-grasp, approach along the board normal, close, verify the hold."""
 
     pregrasp_offset: float = 0.08  # m in front of the grasp point, against the approach
+    # m further back where the joint motion to the pre-grasp ends (then a straight line), so
+    # that the arm does not sweep through the hoses in front of the board (measured: 0.12 m
+    # still let the turning hand push a hose 2.7 cm; 0.2 m did not)
+    standoff: float = 0.2
     surface_offset: float = 0.0075  # m from the seen surface to the hose axis (its radius)
     approach_speed: float = 0.05  # m/s for the last straight approach
     travel_speed: float = 0.25  # m/s for free motions
@@ -37,6 +41,10 @@ class GraspConfig:
     hold_check_distance: float = 0.01  # m pulled back from the board to test the hold
     hold_tolerance: float = 0.005  # m, hose point vs hand displacement (sim verification)
     open_width: float = 0.08
+    # a grasp that does not hold is retried: open, back out, re-approach a neighbouring point
+    # of the segment, ``retry_shift`` further along its axis each time, alternating sides
+    retries: int = 2
+    retry_shift: float = 0.01  # m
 
     def validate(self) -> None:
         check_fields(self, "grasp.")
@@ -51,8 +59,12 @@ class GraspConfig:
         ):
             check_positive(f"grasp.{name}", getattr(self, name))
         check_positive("grasp.surface_offset", self.surface_offset, allow_zero=True)
+        check_positive("grasp.standoff", self.standoff, allow_zero=True)
         check_positive("grasp.hold_check_distance", self.hold_check_distance, allow_zero=True)
         check_positive("grasp.hold_tolerance", self.hold_tolerance)
+        check_positive("grasp.retry_shift", self.retry_shift)
+        if isinstance(self.retries, bool) or not isinstance(self.retries, int) or self.retries < 0:
+            raise ConfigError("grasp.retries", f"must be an integer >= 0, got {self.retries!r}")
 
 
 @dataclass

@@ -17,6 +17,7 @@ returns a :class:`PrimitiveResult` that is falsy and says why.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -144,16 +145,83 @@ def check_interaction(
     return True, ""
 
 
+def plan_interaction(
+    robot: Robot,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    cfg: InteractionConfig,
+    T_world_camera: np.ndarray,
+    approach: Sequence[float] = DEFAULT_APPROACH,
+) -> tuple[bool, str]:
+    """Whether the interaction's motions plan, without moving: the grasp approach (retract,
+    stand-off, straight lines in) and one period of every action, stroke by stroke, on a
+    :class:`~cablesim.robot.dry_run.DryRunRobot` of ``robot`` (its arm model, from its current
+    joints; IK along each line, limits, collisions, branch jumps).  Stricter than
+    :func:`check_interaction`, which checks the end poses one by one: an end point can be
+    reachable while the line to it from the grasp configuration is not (measured: "IK did not
+    converge at 100% of the line" on the first stroke).  Robots without an arm model get
+    :func:`check_interaction`."""
+    from cablesim.robot.dry_run import DryRunRobot
+
+    ok, why = check_interaction(robot, centre, axis, cfg, T_world_camera, approach)
+    if not ok or not hasattr(robot, "arm"):
+        return ok, why
+    dry = DryRunRobot(robot)
+    grasp_cfg = dataclasses.replace(cfg.grasp, retries=0)
+    if cfg.kind == "push":
+        g = approach_for_push(dry, centre, axis, grasp_cfg, approach)
+        directions = [("push", np.asarray(approach, float))]
+    else:
+        g = grasp_at(dry, centre, axis, grasp_cfg, approach)
+        directions = action_directions(cfg.actions, axis, T_world_camera, approach)
+    if not g or g.pose is None:
+        return False, f"planned {g.reason}"
+    a = cfg.actions
+    for label, u in directions:
+        depth = cfg.push_depth if cfg.kind == "push" else a.amplitude
+        way = periodic_waypoints(g.pose, u, depth, 1, one_sided=cfg.kind == "push")
+        r = _run_waypoints(dry, way, a.speed, f"planned action {label}")
+        if not r:
+            return False, r.reason
+    return True, ""
+
+
 # ---------------------------------------------------------------------- grasp
-def _to_pose_via_retract(robot: Robot, pose: Pose, speed_factor: float = 0.5) -> MoveResult:
+def _to_pose_via_retract(
+    robot: Robot,
+    pose: Pose,
+    speed_factor: float = 0.5,
+    standoff: float = 0.0,
+    travel_speed: float = 0.25,
+) -> MoveResult:
     """Joint motion to ``pose`` through the retract configuration (hand down, pulled back),
-    so that the arm does not sweep through the hoses, which the arm-only checks cannot see."""
+    so that the arm does not sweep through the hoses, which the arm-only checks cannot see.
+
+    With ``standoff`` > 0 the joint motion ends ``standoff`` behind ``pose`` along the hand's
+    approach axis and a straight line covers the rest: a joint motion that ends right in front
+    of the board can sweep the hand sideways through the hanging hoses (measured: it dragged
+    the hose of interest 11 cm off its grasp point); one that ends further back does not.  When
+    the stand-off pose is out of reach, half the stand-off is tried; when that is out of reach
+    too or its line is blocked, the joint motion goes straight to ``pose``."""
     q = robot.solve_ik(pose)
     if q is None:
         return MoveResult(False, "no IK solution")
+    q_stage = None
+    for back in (standoff, standoff / 2) if standoff > 0 else ():
+        stage = pose.translated(-back * pose.rotation[:, 2])
+        if robot.check_reachable(stage)[0]:
+            q_stage = robot.solve_ik(stage)
+            if q_stage is not None:
+                break
     r = move_joints_safely(robot, RETRACT_QPOS, speed_factor)
     if not r:
         return MoveResult(False, f"could not retract first: {r.reason}")
+    if q_stage is not None:
+        r = robot.move_joints(q_stage, speed_factor)
+        if r:
+            r = robot.move_to(pose, speed=travel_speed)
+            if r:
+                return r
     return robot.move_joints(q, speed_factor)
 
 
@@ -190,28 +258,101 @@ def grasp_at(
     cfg: GraspConfig | None = None,
     approach: Sequence[float] = DEFAULT_APPROACH,
     hose_point: Callable[[Pose], HosePointProbe | None] | None = None,
+    rng: np.random.Generator | None = None,
 ) -> PrimitiveResult:
     """Grasp at world point ``centre`` with the fingers closing across world ``axis``.
 
     ``hose_point(grasp_pose)`` (simulation only) returns a probe of the grasped hose's
     material point, used to verify that the hose follows the hand within
     ``cfg.hold_tolerance``; it may return None when no hose is near the hand.
+
+    A grasp that does not hold (the fingers close on nothing, the hold check sees the hose lag
+    or the hand cannot pull back, the approach stops short) is retried up to ``cfg.retries``
+    times, with or without ground truth: open, back out to the pre-grasp, re-approach a
+    neighbouring point of the segment ``k * cfg.retry_shift`` along its axis, alternating
+    sides (``rng``, the ``grasp_retry`` stream in simulation, picks the first side; without
+    one, +axis first).  A neighbouring point that is out of reach is skipped.  A grasp that is
+    unreachable before any motion is not retried.  ``details["retries"]`` counts the
+    re-approaches made, ``details["attempts"]`` lists each attempt's offset and result and
+    ``details["moved"]`` says whether the arm moved at all.
     """
     cfg = cfg or GraspConfig()
     app = _unit(approach)
+    along = _unit(axis)
+    side = 1.0 if rng is None else float(rng.choice((-1.0, 1.0)))
+    offsets = [0.0] + [
+        side * (1 if k % 2 else -1) * ((k + 1) // 2) * cfg.retry_shift
+        for k in range(1, cfg.retries + 1)
+    ]
+    attempts: list[dict[str, Any]] = []
+    retries = 0
+    moved = False
+    at_pregrasp = False  # the hand waits at a pre-grasp after a failed attempt
+    result = PrimitiveResult(False, "grasp: no attempt")
+    for k, off in enumerate(offsets):
+        point = np.asarray(centre, float) + off * along
+        result = _grasp_once(robot, point, axis, cfg, app, hose_point, at_pregrasp)
+        attempts.append({"offset_m": off, "result": "held" if result else result.reason})
+        if result.details.get("moved", True):
+            moved = True
+            retries += k > 0
+        if result:
+            break
+        if not result.details.get("moved", True):
+            if k == 0:
+                break  # unreachable before any motion: the segment itself is out of reach
+            continue  # this neighbouring point is out of reach: try the next one
+        if not result.details.get("retriable", False):
+            break
+        backed = _back_out(robot, cfg, result.details.get("pose"))
+        if not backed:
+            attempts[-1]["back_out"] = backed.reason
+            break
+        at_pregrasp = True
+    result.details.pop("pose", None)
+    result.details.pop("retriable", None)
+    result.details.update(retries=retries, attempts=attempts, moved=moved)
+    return result
+
+
+def _back_out(robot: Robot, cfg: GraspConfig, g: Pose | None) -> PrimitiveResult:
+    """Open and move straight back to the pre-grasp of the failed grasp pose ``g``."""
+    robot.open(cfg.open_width)
+    if g is None:
+        return PrimitiveResult(False, "back out: no grasp pose")
+    pre = g.translated(-cfg.pregrasp_offset * g.rotation[:, 2])
+    r = robot.move_to(pre, speed=cfg.approach_speed)
+    if not r:
+        return PrimitiveResult.fail("back out", r)
+    return PrimitiveResult(True)
+
+
+def _grasp_once(
+    robot: Robot,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    cfg: GraspConfig,
+    app: np.ndarray,
+    hose_point: Callable[[Pose], HosePointProbe | None] | None,
+    from_pregrasp: bool,
+) -> PrimitiveResult:
+    """One grasp attempt (see :func:`grasp_at`).  ``details``: ``moved`` (False when it failed
+    before any motion), ``retriable`` (a failure a neighbouring point may cure), ``pose``."""
     g, why = choose_grasp_pose(robot, centre, axis, app, cfg.pregrasp_offset)
     if g is None:
-        return PrimitiveResult(False, f"grasp: {why}")
+        return PrimitiveResult(False, f"grasp: {why}", details={"moved": False})
     app = g.rotation[:, 2]  # the hand's approach axis: the board normal made orthogonal to the hose
     pre = g.translated(-cfg.pregrasp_offset * app)
     if not robot.open(cfg.open_width):
-        return PrimitiveResult.fail("grasp", "the gripper did not open")
-    r = _to_pose_via_retract(robot, pre)
+        return PrimitiveResult.fail("grasp", "the gripper did not open", moved=False)
+    r = robot.move_to(pre, speed=cfg.approach_speed) if from_pregrasp else MoveResult(False)
     if not r:
-        return PrimitiveResult.fail("move to pre-grasp", r)
+        r = _to_pose_via_retract(robot, pre, standoff=cfg.standoff, travel_speed=cfg.travel_speed)
+    if not r:
+        return PrimitiveResult.fail("move to pre-grasp", r, moved=True)
     r = robot.move_to(g, speed=cfg.approach_speed)
     if not r:
-        return PrimitiveResult.fail("approach", r)
+        return PrimitiveResult.fail("approach", r, moved=True, retriable=True, pose=g)
     held = robot.grasp(
         width=cfg.width,
         force=cfg.force,
@@ -219,24 +360,33 @@ def grasp_at(
         epsilon_outer=cfg.epsilon,
     )
     opening = robot.gripper_opening
+    details: dict[str, Any] = {"opening": opening, "moved": True, "retriable": True, "pose": g}
     if not held:
         return PrimitiveResult.fail(
-            "close", f"nothing held (fingers closed to {opening * 1000:.1f} mm)", opening=opening
+            "close", f"nothing held (fingers closed to {opening * 1000:.1f} mm)", **details
         )
-    details: dict[str, Any] = {"opening": opening}
     probe = hose_point(g) if hose_point is not None else None
     if hose_point is not None and probe is None:
         return PrimitiveResult.fail("close", "no hose between the fingers", **details)
     if probe is not None and cfg.hold_check_distance > 0:
         p0, h0 = probe(), robot.ee_pose().position
         r = robot.move_to(g.translated(-cfg.hold_check_distance * app), speed=cfg.approach_speed)
-        if not r:
-            return PrimitiveResult.fail("hold check", r, **details)
         p1, h1 = probe(), robot.ee_pose().position
+        pulled = float(np.dot(h1 - h0, -app))
+        if not r and (
+            not r.reason.startswith("target not reached") or pulled < 0.3 * cfg.hold_check_distance
+        ):
+            # the hand did not pull back far enough to tell whether the hose follows
+            return PrimitiveResult.fail("hold check", r, pulled=pulled, **details)
         err = float(np.linalg.norm((p1 - p0) - (h1 - h0)))
         details["hold_error"] = err
+        if not r:  # a taut hose held the hand short of its target: the hold is judged all the same
+            details["hold_check_short_by"] = float(r.position_error)
         r = robot.move_to(g, speed=cfg.approach_speed)
-        if not r:
+        if not r and not (
+            r.reason.startswith("target not reached")
+            and r.position_error <= cfg.hold_check_distance
+        ):
             return PrimitiveResult.fail("hold check return", r, **details)
         if err > cfg.hold_tolerance:
             return PrimitiveResult.fail(
@@ -245,6 +395,8 @@ def grasp_at(
                 f"(tolerance {cfg.hold_tolerance * 1000:.1f} mm)",
                 **details,
             )
+    details.pop("retriable")
+    details.pop("pose")
     return PrimitiveResult(True, "", pose=g, details=details)
 
 
@@ -326,7 +478,12 @@ def approach_for_push(
     app = g.rotation[:, 2]
     g = g.translated(-standoff * app)
     robot.open(0.0)
-    r = _to_pose_via_retract(robot, g.translated(-cfg.pregrasp_offset * app))
+    r = _to_pose_via_retract(
+        robot,
+        g.translated(-cfg.pregrasp_offset * app),
+        standoff=cfg.standoff,
+        travel_speed=cfg.travel_speed,
+    )
     if not r:
         return PrimitiveResult.fail("move to pre-push", r)
     r = robot.move_to(g, speed=cfg.approach_speed)

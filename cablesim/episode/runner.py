@@ -12,8 +12,10 @@ configured direction while the clock streams frames; release, back off, joint mo
 view, wait until the hoses are still (the clock's ``wait_still``), target frame (with ground
 truth: checked for zero robot pixels), and with ground truth the flow from the target frame to
 every kept frame.  A failure (unreachable, collision, slipping grasp, robot in view) comes back
-as ``InteractionResult(success=False, reason=...)``; only a diverging simulation or a lost
-connection raises.
+as ``InteractionResult(success=False, outcome=..., reason=...)``, ``outcome`` one of
+:data:`OUTCOMES`; only a diverging simulation or a lost connection raises.  A grasp that does
+not hold is retried at neighbouring points of the segment before the interaction fails
+(:func:`~cablesim.episode.primitives.grasp_at`); ``result.grasp_retries`` counts the retries.
 
 Nothing here is simulation-only: the robot, the camera and the clock are interfaces, and what
 only a simulator can measure (which hose the segment shows, follow gain, neighbour
@@ -44,6 +46,37 @@ from cablesim.progress import Say, quiet
 from cablesim.robot.base import Robot
 from cablesim.robot.pose import Pose
 
+#: Named outcomes of an interaction (``InteractionResult.outcome``) and of the runs that
+#: record one per seed or start (``simulate_episode``, ``explore``, ``benchmarks/seeds.py``).
+OUTCOMES: dict[str, str] = {
+    "ok": "the interaction ran; target frame captured",
+    "segment_invalid": "the segment is malformed or has too little depth under it",
+    "unreachable": "the grasp, its pre-grasp, an action end point or the path there is out of "
+    "reach (IK, joint limits, a collision the arm model's check predicts)",
+    "collision": "a motion stopped on a contact in the scene (board, table, a coupling)",
+    "grasp_not_held": "the fingers closed on nothing or the hose slipped, after every retry",
+    "action_failed": "an action stroke ended off its target (the hose held the hand back)",
+    "release_failed": "the gripper did not open",
+    "retreat_failed": "the arm could not move out of view",
+    "robot_in_view": "the robot is visible in the target frame",
+    # simulation: the scene before any interaction (see cablesim.sim.session)
+    "scene_unsettled": "no scene draw settled (cablesim.errors.SceneUnsettledError)",
+    "no_graspable_segment": "no scene draw had a hose of interest with a graspable segment",
+    "diverged": "the physics diverged (cablesim.errors.PhysicsDivergedError)",
+}
+
+
+def failure_outcome(reason: str, default: str) -> str:
+    """The named outcome of a failed motion step from its reason (``default`` otherwise)."""
+    r = reason.lower()
+    if "collision in scene" in r or "contact:" in r:
+        return "collision"
+    if any(k in r for k in ("unreachable", "no ik", "ik did not converge", "joint limit")):
+        return "unreachable"
+    if "ik jumped" in r or "collision:" in r:  # planned: the arm model predicts it
+        return "unreachable"
+    return default
+
 
 @dataclass
 class ActionReport:
@@ -73,6 +106,8 @@ class ActionReport:
 class InteractionResult:
     success: bool
     reason: str = ""
+    outcome: str = ""  # one of OUTCOMES ("ok" on success)
+    grasp_retries: int = 0  # re-approaches at neighbouring points before the grasp held
     stream: Stream | None = None
     hose: int | None = None
     centre: np.ndarray | None = None  # world, estimated from depth
@@ -100,7 +135,9 @@ class InteractionResult:
     def to_dict(self) -> dict[str, Any]:
         return {
             "success": self.success,
+            "outcome": self.outcome,
             "reason": self.reason,
+            "grasp_retries": self.grasp_retries,
             "hose": self.hose,
             "centre": None if self.centre is None else [float(x) for x in self.centre],
             "axis": None if self.axis is None else [float(x) for x in self.axis],
@@ -115,8 +152,11 @@ class InteractionResult:
 
     def summary(self) -> str:
         if not self.success:
-            return f"interaction FAILED: {self.reason}"
-        lines = [f"interaction ok: hose {self.hose}, {len(self.stream or [])} frames (target last)"]
+            return f"interaction FAILED ({self.outcome}): {self.reason}"
+        lines = [
+            f"interaction ok: hose {self.hose}, {len(self.stream or [])} frames (target last), "
+            f"{self.grasp_retries} grasp retries"
+        ]
         for a in self.actions:
             others = ", ".join(
                 f"hose{h} {d * 1000:.1f} mm"
@@ -183,6 +223,7 @@ def run_interaction(
     hose: int | None = None,
     park: Sequence[float] | None = None,
     arm_mask: ArmMaskFunction | None = None,
+    retry_rng: np.random.Generator | None = None,
 ) -> InteractionResult:
     """Grasp (or push) the hose at ``segment`` of the current image and act (module docstring).
 
@@ -192,6 +233,7 @@ def run_interaction(
     ``sink`` (e.g. :class:`~cablesim.recording.RecordingWriter`) gets every frame as soon as
     it exists.  ``arm_mask`` (``(tick) -> HxW bool``, e.g.
     :meth:`cablesim.panda.arm_mask.ArmMasker.for_tick`) fills every frame's ``arm_mask``.
+    it exists.  ``retry_rng`` picks the side of the first grasp retry (see ``grasp_at``).
     """
     cfg = (config or InteractionConfig()).validate()
     say = say or quiet
@@ -208,7 +250,7 @@ def run_interaction(
     try:
         mask, centre, axis = segment_grasp_target(segment, image, T, cfg.grasp.surface_offset)
     except InputError as e:
-        result.reason = f"segment: {e}"
+        result.reason, result.outcome = f"segment: {e}", "segment_invalid"
         return result
     if truth is not None and cfg.capture.ground_truth:
         seen = truth.hose_under(mask)
@@ -224,13 +266,18 @@ def run_interaction(
         if truth is not None:
             held_hose = result.hose
             probe = lambda pose: truth.grasp_probe(pose, held_hose)  # noqa: E731
-        g = prim.grasp_at(robot, centre, axis, cfg.grasp, approach, hose_point=probe)
+        g = prim.grasp_at(robot, centre, axis, cfg.grasp, approach, hose_point=probe, rng=retry_rng)
     else:
         g = prim.approach_for_push(robot, centre, axis, cfg.grasp, approach)
     result.timings["grasp"] = time.perf_counter() - t0
     result.details["grasp"] = g.details
+    result.grasp_retries = int(g.details.get("retries", 0))
     if not g:
-        moved = not g.reason.startswith(("grasp:", "push:"))  # those fail before moving
+        # a push and a grasp's first attempt that fail with "push:"/"grasp:" never moved
+        moved = bool(g.details.get("moved", not g.reason.startswith(("grasp:", "push:"))))
+        step = g.reason.split(":", 1)[0]
+        held = step in ("close", "hold check", "hold check return", "approach", "back out")
+        result.outcome = failure_outcome(g.reason, "grasp_not_held" if held else "unreachable")
         return _abort(result, robot, cfg, retreat_q, g.reason, say, moved=moved)
     result.grasp = g.pose
     assert g.pose is not None
@@ -265,6 +312,7 @@ def run_interaction(
             result.details[f"action{a}_short_strokes_m"] = r.details["short_strokes"]
         say(f"action {a} ({label}): {rep.frames_kept}/{rep.ticks} frames kept, gain {rep.gain:.3f}")
         if not r:
+            result.outcome = failure_outcome(r.reason, "action_failed")
             return _abort(result, robot, cfg, retreat_q, f"action {a} ({label}): {r.reason}", say)
     result.timings["actions"] = time.perf_counter() - t0
 
@@ -272,9 +320,11 @@ def run_interaction(
     t0 = time.perf_counter()
     r = prim.release(robot, cfg.grasp.open_width)
     if not r:
+        result.outcome = "release_failed"
         return _abort(result, robot, cfg, retreat_q, r.reason, say)
     r = prim.retreat(robot, retreat_q, cfg.retreat, approach, cfg.grasp.travel_speed)
     if not r:
+        result.outcome = "retreat_failed"
         return _fail(result, r.reason, say)
     still = clock.wait_still(cfg.retreat)
     result.settle_speed, result.still = still.measure, still.still
@@ -287,6 +337,7 @@ def run_interaction(
     if target.truth is not None:
         result.target_robot_pixels = int((target.truth.labels == LABEL_ROBOT).sum())
         if cfg.retreat.verify and result.target_robot_pixels:
+            result.outcome = "robot_in_view"
             return _fail(
                 result,
                 f"the robot is visible in the target frame ({result.target_robot_pixels} pixels)",
@@ -298,7 +349,7 @@ def run_interaction(
         say(f"target frame captured; ground-truth flow for {len(collector.frames) - 1} frames")
     collector.finish(say)
     result.stream = Stream(collector.frames, meta=_stream_meta(cfg, result, directions, T))
-    result.success = True
+    result.success, result.outcome = True, "ok"
     total = time.perf_counter() - t_start
     result.timings.update(
         total=total,

@@ -31,6 +31,7 @@ class Session:
     cfg: Any
     truth: Any = None  # a TruthProvider (simulation, digital twin) or None (real robot)
     hose: int | None = None  # the hose of interest, when known
+    retry_rng: np.random.Generator | None = None  # side of the first grasp retry (grasp_at)
 
     @property
     def T_world_camera(self) -> np.ndarray:
@@ -76,6 +77,7 @@ class Session:
             hose=self.hose,
             park=self.park,
             arm_mask=self.arm_masker(interaction or self.cfg.interaction),
+            retry_rng=self.retry_rng,
         )
 
     def arm_masker(self, interaction: InteractionConfig) -> Any:

@@ -292,9 +292,15 @@ class PhysicsConfig:
 
 @dataclass
 class SceneConfig(Config):
-    """Everything that defines a scene; ``seed`` draws the random parts."""
+    """Everything that defines a scene; ``seed`` draws the random parts.
+
+    ``draw`` numbers the layout drawn from the seed: 0 is the seed's own (stream ``hoses``),
+    k > 0 the k-th re-draw (child k of stream ``scene_resample``), which the simulated session
+    makes when a draw does not settle or shows no graspable segment (:mod:`cablesim.sim.session`).
+    The camera pose is the seed's in every draw."""
 
     seed: int = 0
+    draw: int = 0
     board: BoardConfig = field(default_factory=BoardConfig)
     hoses: HoseConfig = field(default_factory=HoseConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
@@ -305,6 +311,8 @@ class SceneConfig(Config):
         check_fields(self)
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
+        if isinstance(self.draw, bool) or not isinstance(self.draw, int) or self.draw < 0:
+            raise ConfigError("draw", f"must be a non-negative integer, got {self.draw!r}")
         self.board.validate()
         self.hoses.validate()
         self.camera.validate()

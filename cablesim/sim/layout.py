@@ -5,6 +5,13 @@ A hose is attached at its first end to the coupling on connector ``ends[0]`` and
 ``len(ends) == 2``, at its far end to connector ``ends[1]``.  Start shapes hang in front of the
 board, each hose bulging out by its own distance (so no two start shapes intersect); what
 would fall below the table is laid on it, each hose at its own height.
+
+``SceneConfig.draw`` selects the draw: 0 takes the hoses from the seed's ``hoses`` stream,
+k > 0 from child k of its ``scene_resample`` stream (a re-draw, see :mod:`cablesim.sim.session`).
+
+Clutter: :func:`crossing_pairs` tells which hoses cross each other in the camera image (their
+projected rods intersect inside the frame); the session requires the hose of interest to
+cross at least one other hose (the thesis's clutter), re-drawing the scene when none does.
 """
 
 from __future__ import annotations
@@ -50,9 +57,16 @@ def attach_point(cfg: SceneConfig, connector: int) -> np.ndarray:
     return np.array([x, y, z])
 
 
+def layout_rng(cfg: SceneConfig) -> np.random.Generator:
+    """The generator of the hose layout of ``cfg``'s seed and draw."""
+    if cfg.draw == 0:
+        return stream(cfg.seed, "hoses")
+    return stream(cfg.seed, "scene_resample", cfg.draw)
+
+
 def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
     h = cfg.hoses
-    rng = stream(cfg.seed, "hoses")
+    rng = layout_rng(cfg)
     free = list(range(len(cfg.board.connectors)))
     colour_order = rng.permutation(len(h.colors))
     specs = []
@@ -216,3 +230,73 @@ def start_shape(cfg: SceneConfig, spec: HoseSpec) -> np.ndarray:
     pts = _equalise_chords(pts, spec.length / (spec.n_vertices - 1))
     pts[:, 2] = np.maximum(pts[:, 2], spec.floor)  # the nudge may have dipped into the table
     return pts
+
+
+# ---------------------------------------------------------------------- clutter
+def project_points(
+    points: np.ndarray, T_world_camera: np.ndarray, f: float, cx: float, cy: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2) pixel coordinates (u, v) and (N,) depths of world ``points`` in a pinhole camera
+    (OpenCV axes in ``T_world_camera``, focal length ``f`` px, principal point ``cx, cy``)."""
+    T = np.asarray(T_world_camera, float)
+    p = (np.asarray(points, float) - T[:3, 3]) @ T[:3, :3]
+    z = p[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = np.stack([f * p[:, 0] / z + cx, f * p[:, 1] / z + cy], 1)
+    return uv, z
+
+
+def _segments_cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n-1, m-1) bool: segment i of polyline ``a`` (n, 2) properly crosses segment j of ``b``;
+    also returns nothing about touching end points (a crossing through a shared vertex counts
+    on one of its segments)."""
+    p, r = a[:-1, None], (a[1:] - a[:-1])[:, None]
+    q, s = b[None, :-1], (b[1:] - b[:-1])[None]
+
+    def cross(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return x[..., 0] * y[..., 1] - x[..., 1] * y[..., 0]
+
+    denom = cross(r, s)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = cross(q - p, s) / denom
+        w = cross(q - p, r) / denom
+    return (np.abs(denom) > 1e-12) & (t >= 0) & (t < 1) & (w >= 0) & (w < 1)
+
+
+def crossing_pairs(
+    polylines: list[np.ndarray],
+    T_world_camera: np.ndarray,
+    f: float,
+    cx: float,
+    cy: float,
+    width: int,
+    height: int,
+) -> set[tuple[int, int]]:
+    """Pairs ``(i, j)``, i < j, of hoses whose rods (world polylines) cross in the image: their
+    projections intersect at a point inside the ``width`` x ``height`` frame, both in front of
+    the camera.  One hose passing in front of another is the clutter of the thesis."""
+    uvs = []
+    for pts in polylines:
+        uv, z = project_points(pts, T_world_camera, f, cx, cy)
+        uvs.append(np.where((z > 1e-6)[:, None], uv, np.nan))
+    pairs = set()
+    for i in range(len(uvs)):
+        for j in range(i + 1, len(uvs)):
+            a, b = uvs[i], uvs[j]
+            hit = _segments_cross(a, b)
+            for si, sj in zip(*np.nonzero(hit), strict=True):
+                # the crossing point must lie in the frame
+                r = a[si + 1] - a[si]
+                s = b[sj + 1] - b[sj]
+                qp = b[sj] - a[si]
+                t = (qp[0] * s[1] - qp[1] * s[0]) / (r[0] * s[1] - r[1] * s[0])
+                x = a[si] + t * r
+                if 0 <= x[0] < width and 0 <= x[1] < height:
+                    pairs.add((i, j))
+                    break
+    return pairs
+
+
+def crossed_by(pairs: set[tuple[int, int]], hose: int) -> list[int]:
+    """The hoses that cross ``hose`` (from :func:`crossing_pairs`), in index order."""
+    return sorted({j if i == hose else i for i, j in pairs if hose in (i, j)})

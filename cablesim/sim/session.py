@@ -11,13 +11,48 @@ A session holds the world (settled, reset), ``SimPanda``, ``SimCamera``, the sim
 (frames on simulated time; the neighbour perturbation as its action hook), the ground-truth
 provider (:class:`~cablesim.sim.truth.SimTruth`), the hose of interest and the named random
 streams of the seed (:mod:`cablesim.seeding`): ``episode`` draws the hose of interest and the
-start segment, ``perturb`` the perturbation.  ``simulate_episode``, ``explore``, the Gymnasium
-environment, the dm_env adapter and the benchmarks all build their simulation here.
+start segment, ``perturb`` the perturbation, ``grasp_retry`` the side a failed grasp is
+retried on first.  ``simulate_episode``, ``explore``, the Gymnasium environment, the dm_env
+adapter and the benchmarks all build their simulation here.
+
+**What a session guarantees, and the re-draw rule.**  A session built from a config alone
+(no ``world`` given) hands out a scene that settled and a hose of interest with a visible,
+reachable, graspable start segment that, by default (``EpisodeConfig.clutter``), crosses at
+least one other hose in the image.  It gets there deterministically:
+
+1. Draw k of the scene (``SceneConfig.draw``, starting at the config's, 0 by default: the
+   seed's own layout; k > 0 takes the hoses from child k of the seed's ``scene_resample``
+   stream, the camera stays) is built and settled.  A draw that does not settle
+   (:class:`~cablesim.errors.SceneUnsettledError`) is turned down.
+2. The hose of interest: the config's ``hose`` if set; else the ``episode`` stream draws one
+   hose h (as it always did), and when h does not qualify, hoses h+1, h+2, ... (modulo the
+   count) are tried in turn.  A drawn hose qualifies when it crosses another hose in the
+   image (:func:`~cablesim.sim.layout.crossing_pairs`; skipped with ``clutter=False`` or a
+   fixed ``hose``) and the picker finds a start segment on it
+   (:func:`~cablesim.sim.picker.pick_segment`).  Draw 0 draws both from the ``episode``
+   stream, draw k > 0 from its child k, so that a draw's choices do not depend on the draws
+   before it.  When no hose qualifies, the draw is turned down.
+3. A turned-down draw is followed by draw k+1, up to ``max_draws`` draws.  Then the last
+   reason is raised as a named :class:`~cablesim.errors.SceneError`
+   (``scene_unsettled`` or ``no_graspable_segment``, its ``outcome``), with every draw's
+   reason in its message; runs record it as an outcome instead of stopping
+   (:func:`simulate_episode`, ``explore``, ``benchmarks/seeds.py``).
+
+``session.draws`` is the number of draws built (1 when the seed's own scene served),
+``session.resamples`` says why each earlier draw was turned down, and ``session.cfg`` carries
+the draw that served (``cfg.scene.draw``), so that printing and re-running the config rebuilds
+the same scene, hose of interest and start segment at once.  Settled scenes and the outcome of a draw that did
+not settle are cached (:mod:`cablesim.sim.settle`), so a re-run costs no settling.
+
+A session given a ``world`` (the environment and the tests reuse one) takes it as it is and
+picks nothing in advance (``pick_start`` raises ``NoGraspableSegmentError`` when the hose has no
+segment).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import time
 from dataclasses import dataclass, field
@@ -29,7 +64,13 @@ from cablesim.config import Config, check_fields
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.runner import InteractionResult
 from cablesim.episode.session import Session
-from cablesim.errors import ConfigError
+from cablesim.errors import (
+    ConfigError,
+    NoGraspableSegmentError,
+    PhysicsDivergedError,
+    SceneError,
+    SceneUnsettledError,
+)
 from cablesim.progress import Progress, Say, quiet
 from cablesim.seeding import stream
 from cablesim.sim.config import SceneConfig
@@ -47,11 +88,19 @@ class EpisodeConfig(Config):
     interaction: InteractionConfig = field(default_factory=InteractionConfig)
     perturb: PerturbConfig = field(default_factory=PerturbConfig)
     progress: bool = False  # print progress lines
+    # a drawn hose of interest must cross another hose in the image (the thesis's clutter)
+    clutter: bool = True
+    # scene draws tried (see the module docstring) before a named failure
+    max_draws: int = 8
 
     def validate(self) -> EpisodeConfig:
         check_fields(self)
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
+        if isinstance(self.max_draws, bool) or not isinstance(self.max_draws, int):
+            raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
+        if self.max_draws < 1:
+            raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
         if self.hose is not None and (
             isinstance(self.hose, bool)
             or not isinstance(self.hose, int)
@@ -73,23 +122,37 @@ class SimSession(Session):
     session of the same scene (the world is reset to its settled state)."""
 
     def __init__(self, config: EpisodeConfig, world: Any = None, camera: Any = None) -> None:
+        self.cfg = config.validate()
+        t0 = time.perf_counter()
+        self.rng = stream(self.cfg.seed, "episode")
+        self.retry_rng = stream(self.cfg.seed, "grasp_retry")
+        self.hose: int | None = self.cfg.hose
+        self.start: Any = None  # the PickedSegment prepared at build (guaranteed sessions)
+        self.draws = 0  # scene draws built
+        self.resamples: list[dict[str, Any]] = []  # why each turned-down draw was
+        if world is not None:
+            self._assemble(world, camera)
+        else:
+            self._guarantee()
+        self.build_time = time.perf_counter() - t0
+
+    @classmethod
+    def build(cls, config: EpisodeConfig, world: Any = None, camera: Any = None) -> SimSession:
+        return cls(config, world, camera)
+
+    def _assemble(self, world: Any, camera: Any = None) -> None:
+        """Robot, camera, truth, perturbation and clock on ``world`` (reset)."""
         from cablesim.sim.camera import SimCamera
         from cablesim.sim.clock import SimClock
         from cablesim.sim.perturb import NeighbourPerturbation
         from cablesim.sim.sim_panda import SimPanda
         from cablesim.sim.truth import SimTruth
-        from cablesim.sim.world import World
 
-        self.cfg = config.validate()
-        t0 = time.perf_counter()
-        if world is None:
-            world = World.build(self.cfg.scene_config())
         world.reset()
         self.world = world
         self.robot = SimPanda(world)  # fresh: no IK warm start carried between sessions
         self.camera = camera if camera is not None else SimCamera(world)
         self.truth = SimTruth(world, self.camera)
-        self.rng = stream(self.cfg.seed, "episode")
         self.perturbation = NeighbourPerturbation(
             self.cfg.perturb, stream(self.cfg.seed, "perturb")
         )
@@ -98,12 +161,93 @@ class SimSession(Session):
         self.clock = SimClock(
             world, self.robot, grab, icfg.capture.frame_rate, action_hooks=[self.perturbation]
         )
-        self.hose: int | None = self.cfg.hose
-        self.build_time = time.perf_counter() - t0
 
-    @classmethod
-    def build(cls, config: EpisodeConfig, world: Any = None, camera: Any = None) -> SimSession:
-        return cls(config, world, camera)
+    def _guarantee(self) -> None:
+        """Draw scenes until one settles and has a qualifying hose of interest (module
+        docstring); raises the last draw's named ``SceneError`` after ``max_draws``."""
+        from cablesim.sim.world import World
+
+        cfg = self.cfg
+        last: SceneError | None = None
+        reasons: dict[str, int] = {}  # why candidates were turned down, over every draw
+        for k in range(cfg.max_draws):
+            scene = dataclasses.replace(cfg.scene_config(), draw=cfg.scene.draw + k)
+            self.draws += 1
+            # each draw picks with its own stream: re-running its config repeats its choices
+            self.rng = stream(cfg.seed, "episode", *((scene.draw,) if scene.draw else ()))
+            try:
+                world = World.build(scene)
+            except SceneUnsettledError as e:
+                last = e
+                self.resamples.append({"draw": scene.draw, "outcome": e.outcome, "reason": str(e)})
+                continue
+            self._assemble(world)
+            try:
+                self.start = self._choose_start(scene.draw)
+            except NoGraspableSegmentError as e:
+                last = e
+                for r, n in e.reasons.items():
+                    reasons[r] = reasons.get(r, 0) + n
+                self.resamples.append({"draw": scene.draw, "outcome": e.outcome, "reason": str(e)})
+                self.camera.close()
+                continue
+            self.cfg = cfg.replace(scene=dataclasses.replace(cfg.scene, draw=scene.draw))
+            return
+        assert last is not None
+        why = "; ".join(r["reason"] for r in self.resamples)
+        message = f"seed {cfg.seed}: no usable scene in {cfg.max_draws} draws ({why})"
+        if isinstance(last, SceneUnsettledError):
+            err: SceneError = SceneUnsettledError(message, last.speed, last.limit)
+        else:
+            err = NoGraspableSegmentError(message, reasons)
+        err.resamples = list(self.resamples)  # type: ignore[attr-defined]
+        raise err
+
+    def _choose_start(self, draw: int) -> Any:
+        """The hose of interest and its start segment in the current world (module docstring,
+        rule 2); raises ``NoGraspableSegmentError`` when no hose qualifies."""
+        from cablesim.sim.layout import crossed_by, crossing_pairs
+        from cablesim.sim.picker import pick_segment
+
+        cfg, world = self.cfg, self.world
+        n = len(world.hoses)
+        if cfg.hose is not None:
+            candidates, pairs = [cfg.hose], None
+        else:
+            first = int(self.rng.integers(n))
+            candidates = [(first + i) % n for i in range(n)]
+            pairs = None
+            if cfg.clutter:
+                K = self.camera.intrinsics
+                pairs = crossing_pairs(
+                    [world.hose_vertices(i) for i in range(n)],
+                    self.camera.T_world_camera,
+                    K.f,
+                    K.cx,
+                    K.cy,
+                    K.width,
+                    K.height,
+                )
+        reasons: dict[str, int] = {}
+        why = []
+        for h in candidates:
+            if pairs is not None and not crossed_by(pairs, h):
+                reasons["crosses no other hose"] = reasons.get("crosses no other hose", 0) + 1
+                why.append(f"hose {h} crosses no other hose")
+                continue
+            try:
+                picked = pick_segment(world, self.robot, self.camera, h, self.rng, cfg.interaction)
+            except NoGraspableSegmentError as e:
+                for r, c in e.reasons.items():
+                    reasons[r] = reasons.get(r, 0) + c
+                why.append(str(e))
+                continue
+            self.hose = h
+            self.perturbation.hose_of_interest = h
+            return picked
+        raise NoGraspableSegmentError(
+            f"no hose of interest qualifies in draw {draw} ({'; '.join(why)})", reasons
+        )
 
     # ------------------------------------------------------------------ parts
     @property
@@ -111,7 +255,8 @@ class SimSession(Session):
         return tuple(self.world.cfg.robot.park_qpos)
 
     def draw_hose(self) -> int:
-        """The hose of interest: the config's, else drawn from the ``episode`` stream (once)."""
+        """The hose of interest: the one chosen at build, the config's, else drawn from the
+        ``episode`` stream (once)."""
         if self.hose is None:
             self.hose = int(self.rng.integers(len(self.world.hoses)))
         self.perturbation.hose_of_interest = self.hose
@@ -119,9 +264,17 @@ class SimSession(Session):
 
     def pick_start(self, hose: int | None = None, interaction: InteractionConfig | None = None):
         """A seeded visible, graspable start segment of ``hose`` (default: the hose of
-        interest) in the current image: the stand-in for a person's click."""
+        interest) in the current image: the stand-in for a person's click.  The segment
+        prepared at build is handed out for the hose of interest with the session's own
+        interaction config."""
         from cablesim.sim.picker import pick_segment
 
+        if (
+            self.start is not None
+            and hose in (None, self.start.hose)
+            and interaction in (None, self.cfg.interaction)
+        ):
+            return self.start
         if hose is not None:
             self.hose = hose
         hose = self.draw_hose()
@@ -134,20 +287,34 @@ class SimSession(Session):
 
         return Evaluator(self.truth, self.draw_hose())
 
+    def describe_draws(self) -> dict[str, Any]:
+        """The draw that served, how many were built and why earlier ones were turned down."""
+        return {
+            "draw": self.world.cfg.draw,
+            "draws": self.draws,
+            "resamples": self.draws - 1 if self.draws else 0,
+            "turned_down": list(self.resamples),
+        }
+
 
 @dataclass
 class SimulatedEpisode:
+    """One simulated interaction.  When no scene draw served (``result.outcome`` is
+    ``scene_unsettled`` or ``no_graspable_segment``) there is no session, segment or image."""
+
     result: InteractionResult
-    segment: Any  # PickedSegment
-    session: SimSession
-    start_image: CameraImage  # the image the start segment was picked in
+    segment: Any  # PickedSegment, or None when no scene draw served
+    session: SimSession | None
+    start_image: CameraImage | None  # the image the start segment was picked in
+    draws: dict[str, Any] = field(default_factory=dict)  # SimSession.describe_draws()
 
     @property
     def build_time(self) -> float:
-        return self.session.build_time
+        return self.session.build_time if self.session is not None else math.nan
 
     def close(self) -> None:
-        self.session.close()
+        if self.session is not None:
+            self.session.close()
 
 
 def simulate_episode(
@@ -157,15 +324,34 @@ def simulate_episode(
 ) -> SimulatedEpisode:
     """Build the session of ``config``, pick a start segment of ``config.hose`` (drawn when
     None) and run the interaction.  With ``record_to`` the frames are written to that directory
-    as they come (see :mod:`cablesim.recording`)."""
+    as they come (see :mod:`cablesim.recording`).  A scene no draw of which serves (module
+    docstring), or whose physics diverged while settling, comes back as a failed result with
+    its named ``outcome`` (``scene_unsettled``, ``no_graspable_segment``, ``diverged``), not as
+    an error."""
     from cablesim.recording import RecordingWriter
 
     if record_to is not None:  # before the scene is built
         RecordingWriter.check_target(record_to, overwrite)
     say: Say = Progress("episode") if config.progress else quiet
-    session = SimSession.build(config)
+    try:
+        session = SimSession.build(config)
+    except (SceneError, PhysicsDivergedError) as e:
+        say(f"no interaction: {e.outcome}: {e}")
+        draws = {
+            "draw": None,
+            "draws": config.max_draws,
+            "turned_down": getattr(e, "resamples", []),
+        }
+        draws["resamples"] = draws["draws"]
+        result = InteractionResult(False, reason=str(e), outcome=e.outcome, hose=config.hose)
+        result.details["scene_draws"] = draws
+        return SimulatedEpisode(result, None, None, None, draws)
     cfg = session.cfg
-    say(f"scene seed {cfg.seed} built in {session.build_time:.1f} s")
+    draws = session.describe_draws()
+    say(
+        f"scene seed {cfg.seed} built in {session.build_time:.1f} s"
+        + (f" (draw {cfg.scene.draw}: {session.draws - 1} re-draws)" if session.draws > 1 else "")
+    )
     start_image = session.capture()
     segment = session.pick_start()
     say(
@@ -173,7 +359,12 @@ def simulate_episode(
         f"{segment.centre_px} ({segment.tries} tries)"
     )
     cfg = cfg.replace(hose=session.hose)
-    meta = {"seed": cfg.seed, "config": cfg.to_dict(), "segment_px": segment.pixels.tolist()}
+    meta = {
+        "seed": cfg.seed,
+        "config": cfg.to_dict(),
+        "segment_px": segment.pixels.tolist(),
+        "scene_draws": draws,
+    }
     if record_to is None:
         result = session.interact(segment.mask, say=say)
     else:
@@ -182,6 +373,7 @@ def simulate_episode(
             final = dict(result.stream.meta) if result.stream is not None else {}
             final.update(meta, result=result.to_dict())
             writer.close(final, complete=result.success)
+    result.details["scene_draws"] = draws
     if result.stream is not None:
         result.stream.meta.update(meta)
-    return SimulatedEpisode(result, segment, session, start_image)
+    return SimulatedEpisode(result, segment, session, start_image, draws)

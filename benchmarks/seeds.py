@@ -1,0 +1,288 @@
+"""Does every seed give an interaction?  One default interaction per seed of a range, as
+``cablesim episode --seed S`` runs it (default config: 4 hoses, 640x480, hose of interest and
+start segment drawn from the seed), with the outcome of each seed recorded by name.
+
+    nice -n 10 .venv/bin/python benchmarks/seeds.py --first 1000 --count 100 --workers 2 --write
+
+Per seed: success, named outcome (``cablesim.episode.runner.OUTCOMES``; an unexpected error is
+recorded as ``error:<Type>`` with its message, never raised), grasp retries, scene re-draws
+(``cablesim.sim.session``), hose of interest, wall and CPU time of the worker, and a digest of
+the target frame (RGB + depth) and of the whole result, so that two runs can be compared bit
+for bit.  Seeds run in independent ``spawn`` worker processes (``--workers``); a seed's result
+does not depend on the number of workers or on the order.  ``--cache-dir`` points the settle
+cache (``$CABLESIM_CACHE``) somewhere else, e.g. an empty directory so that the times include
+settling as a new user's first run does.  ``--write`` writes ``benchmarks/results/seeds.md``
+and ``seeds.json``; results are also written after every seed (``--json``), so an interrupted
+run keeps what it had.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import hashlib
+import json
+import multiprocessing
+import os
+import platform
+import resource
+import signal
+import statistics
+import subprocess
+import sys
+import time
+import traceback
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any
+
+from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
+
+RESULTS = Path(__file__).parent / "results"
+
+
+def _worker_init() -> None:
+    """Workers leave Ctrl-C to the parent, which cancels what is queued and stops them."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def run_seed(
+    seed: int, cache_dir: str | None = None, config: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """One interaction for ``seed`` (the default ``EpisodeConfig``, or ``config`` as a dict with
+    the seed replaced); never raises: an error is recorded as a named outcome."""
+    if cache_dir is not None:
+        os.environ["CABLESIM_CACHE"] = cache_dir
+    import numpy as np
+
+    import cablesim  # noqa: F401  (headless GL before mujoco)
+    from cablesim.errors import outcome_of
+    from cablesim.sim.session import EpisodeConfig, simulate_episode
+
+    t0, c0 = time.perf_counter(), _cpu()
+    row: dict[str, Any] = {"seed": seed}
+    try:
+        cfg = EpisodeConfig() if config is None else EpisodeConfig.from_dict(config)
+        ep = simulate_episode(cfg.replace(seed=seed))
+        try:
+            r = ep.result
+            draws = ep.draws or {}
+            row.update(
+                success=bool(r.success),
+                outcome=r.outcome,
+                reason=r.reason,
+                hose=r.hose,
+                grasp_retries=int(r.grasp_retries),
+                draw=draws.get("draw"),
+                resamples=int(draws.get("resamples", 0)),
+                turned_down=[t.get("outcome") for t in draws.get("turned_down", [])],
+                frames=0 if r.stream is None else len(r.stream),
+            )
+            if r.stream is not None:
+                t = r.stream.target
+                h = hashlib.sha256(np.ascontiguousarray(t.rgb).tobytes())
+                h.update(np.ascontiguousarray(t.depth).tobytes())
+                row["target_sha256"] = h.hexdigest()[:16]
+            digest = json.dumps(r.to_dict() | {"timings_s": None}, sort_keys=True, default=str)
+            row["result_sha256"] = hashlib.sha256(digest.encode()).hexdigest()[:16]
+        finally:
+            ep.close()
+    except Exception as e:  # recorded by name; the run goes on with the next seed
+        row.update(
+            success=False,
+            outcome=outcome_of(e),
+            reason=f"{type(e).__name__}: {e}",
+            traceback=traceback.format_exc(limit=6),
+            grasp_retries=0,
+            resamples=0,
+        )
+    row["wall_s"] = time.perf_counter() - t0
+    row["cpu_s"] = _cpu() - c0
+    return row
+
+
+def _short(text: str, n: int = 90) -> str:
+    text = " ".join(str(text).split()).replace("|", "/")
+    return text if len(text) <= n else text[: n - 3] + "..."
+
+
+def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    ok = [r for r in rows if r.get("success")]
+    cpu = [r["cpu_s"] for r in rows if r["cpu_s"] == r["cpu_s"]]  # not NaN
+    return {
+        "seeds": len(rows),
+        "successes": len(ok),
+        "outcomes": dict(Counter(r["outcome"] for r in rows).most_common()),
+        "grasp_retries": dict(sorted(Counter(r.get("grasp_retries", 0) for r in rows).items())),
+        "seeds_with_retries": sum(1 for r in rows if r.get("grasp_retries", 0) > 0),
+        "resamples": dict(sorted(Counter(r.get("resamples", 0) for r in rows).items())),
+        "seeds_resampled": sum(1 for r in rows if r.get("resamples", 0) > 0),
+        "turned_down_draws": dict(
+            Counter(o for r in rows for o in r.get("turned_down", []) if o).most_common()
+        ),
+        "cpu_s_median": statistics.median(cpu) if cpu else None,
+        "cpu_s_total": sum(cpu),
+    }
+
+
+def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
+    s = summary(rows)
+    first, last = rows[0]["seed"], rows[-1]["seed"]
+    outcomes = ", ".join(f"{k} {v}" for k, v in s["outcomes"].items())
+    retries = ", ".join(f"{k}: {v} seeds" for k, v in s["grasp_retries"].items())
+    resamples = ", ".join(f"{k}: {v} seeds" for k, v in s["resamples"].items())
+    turned = ", ".join(f"{k} {v}" for k, v in s["turned_down_draws"].items()) or "none"
+    lines = [
+        "# Every seed gives an interaction",
+        "",
+        "One default interaction per seed (`cablesim episode --seed S`: 4 hoses, 640x480, hose of "
+        "interest and start segment drawn from the seed; scene re-drawn by the session's "
+        "documented rule when a draw does not settle or has no qualifying hose; a grasp that "
+        "does not hold is retried at neighbouring points).  "
+        f"`{meta['command']}`.",
+        "",
+        f"- date: {meta['date']}; commit {meta['commit']}",
+        f"- machine: {meta['machine']}; {meta['workers']} worker processes (spawn); load "
+        f"average at start / end {meta['load_start']} / {meta['load_end']}",
+        f"- settle cache: {meta['cache']}",
+        f"- wall time of the run: {meta['wall_s']:.0f} s; CPU time per seed: median "
+        f"{s['cpu_s_median'] or 0:.1f} s, total {s['cpu_s_total'] / 60:.1f} min",
+        "",
+        "## Summary",
+        "",
+        f"- seeds {first}-{last}: **{s['successes']} of {s['seeds']} gave a successful "
+        "interaction**",
+        f"- outcomes: {outcomes}",
+        f"- grasp retries: {retries}",
+        f"- scene re-draws (resamples): {resamples}; turned-down draws: {turned}",
+        "",
+        "## Per seed",
+        "",
+        "| seed | success | outcome | hose | draw | re-draws | grasp retries | wall s | CPU s "
+        "| reason |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['seed']} | {'yes' if r.get('success') else 'no'} | {r['outcome']} | "
+            f"{r.get('hose', '')} | {'' if r.get('draw') is None else r['draw']} | "
+            f"{r.get('resamples', 0)} | {r.get('grasp_retries', 0)} | {r['wall_s']:.1f} | "
+            f"{r['cpu_s']:.1f} | {_short(r.get('reason', ''))} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def _commit() -> str:
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True,
+            text=True,
+            cwd=Path(__file__).parent,
+            check=False,
+        )
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            cwd=Path(__file__).parent,
+            check=False,
+        )
+        return out.stdout.strip() + (" (with uncommitted changes)" if dirty.stdout.strip() else "")
+    except OSError:
+        return "unknown"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--first", type=int, default=1000, help="first seed (1000)")
+    ap.add_argument("--count", type=int, default=100, help="number of consecutive seeds (100)")
+    ap.add_argument("--seeds", type=int, nargs="+", default=None, help="explicit seeds instead")
+    ap.add_argument("--workers", type=int, default=2, help="worker processes (2)")
+    ap.add_argument("--cache-dir", type=Path, default=None, help="settle cache to use")
+    ap.add_argument("--json", type=Path, default=None, help="write the rows here as they come")
+    ap.add_argument("--write", action="store_true", help="write benchmarks/results/seeds.md/json")
+    ap.add_argument("--md", type=Path, default=None, help="write the markdown table here")
+    args = ap.parse_args(argv)
+    seeds = (
+        args.seeds if args.seeds is not None else list(range(args.first, args.first + args.count))
+    )
+    json_path = args.json or (RESULTS / "seeds.json" if args.write else None)
+    md_path = args.md or (RESULTS / "seeds.md" if args.write else None)
+    cache = None if args.cache_dir is None else str(args.cache_dir.resolve())
+    if cache is not None:
+        Path(cache).mkdir(parents=True, exist_ok=True)
+    meta: dict[str, Any] = {
+        "command": "benchmarks/seeds.py " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "commit": _commit(),
+        "machine": f"{cpu_model()}, {os.cpu_count()} cores, {platform.platform()}, "
+        f"python {platform.python_version()}",
+        "workers": args.workers,
+        "load_start": " ".join(f"{x:.2f}" for x in os.getloadavg()),
+        "cache": cache or os.environ.get("CABLESIM_CACHE", "~/.cache/cablesim (default)"),
+    }
+    t0 = time.perf_counter()
+    rows: dict[int, dict[str, Any]] = {}
+
+    def flush() -> None:
+        done = [rows[s] for s in seeds if s in rows]
+        meta.update(
+            wall_s=time.perf_counter() - t0,
+            load_end=" ".join(f"{x:.2f}" for x in os.getloadavg()),
+        )
+        if json_path is not None:
+            json_path.parent.mkdir(parents=True, exist_ok=True)
+            doc = {"meta": meta, "summary": summary(done) if done else {}, "rows": done}
+            json_path.write_text(json.dumps(doc, indent=1, default=str) + "\n")
+        if md_path is not None and done:
+            md_path.parent.mkdir(parents=True, exist_ok=True)
+            md_path.write_text(markdown(done, meta))
+
+    ctx = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx, initializer=_worker_init)
+    try:  # the pool is shut down below, also on Ctrl-C
+        futures = {pool.submit(run_seed, s, cache): s for s in seeds}
+        for fut in as_completed(futures):
+            s = futures[fut]
+            try:
+                row = fut.result()
+            except Exception as e:  # the worker itself died: record it, go on
+                row = {
+                    "seed": s,
+                    "success": False,
+                    "outcome": f"error:{type(e).__name__}",
+                    "reason": f"worker failed: {e}",
+                    "wall_s": float("nan"),
+                    "cpu_s": float("nan"),
+                }
+            rows[s] = row
+            print(
+                f"seed {s}: {row['outcome']}"
+                f" (retries {row.get('grasp_retries', 0)}, re-draws {row.get('resamples', 0)},"
+                f" {row['cpu_s']:.0f} s CPU) [{len(rows)}/{len(seeds)}]"
+                + ("" if row.get("success") else f" {_short(row.get('reason', ''), 160)}"),
+                flush=True,
+            )
+            flush()
+        pool.shutdown()
+    except KeyboardInterrupt:
+        print("interrupted: stopping the workers, writing what finished", flush=True)
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+    flush()
+    done = [rows[s] for s in seeds if s in rows]
+    s = summary(done) if done else {}
+    print(json.dumps(s, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

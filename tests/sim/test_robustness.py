@@ -1,0 +1,292 @@
+"""Every seed gives an interaction or a named outcome (issue 9): a scene that will not settle
+and a hose with no graspable segment come back as named outcomes and the run goes on; the
+session re-draws a scene deterministically; a grasp that does not hold is retried at
+neighbouring points, with or without ground truth, and the retries are counted."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cablesim.episode.config import InteractionConfig
+from cablesim.episode.runner import OUTCOMES, failure_outcome
+from cablesim.errors import (
+    NoGraspableSegmentError,
+    SceneUnsettledError,
+    UnreachableError,
+    outcome_of,
+)
+from cablesim.perception.frames import LABEL_ROBOT
+from cablesim.seeding import stream
+from cablesim.sim.config import CameraConfig, HoseConfig, PhysicsConfig, SceneConfig
+from cablesim.sim.layout import crossed_by, crossing_pairs
+from cablesim.sim.session import EpisodeConfig, SimSession, simulate_episode
+
+BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
+
+
+def small(seed: int, hoses: int = 2, **changes) -> EpisodeConfig:
+    scene = SceneConfig(hoses=HoseConfig(count=hoses), camera=CameraConfig(width=160, height=120))
+    return EpisodeConfig(seed=seed, scene=scene, **changes)
+
+
+def unsettled(seed: int = 3) -> EpisodeConfig:
+    """A scene that will not settle: 0.2 s of simulated time is far too short."""
+    cfg = small(seed, max_draws=2)
+    cfg.scene.physics = PhysicsConfig(settle_max_time=0.2)
+    return cfg
+
+
+def ungraspable(seed: int = 3) -> EpisodeConfig:
+    """No hose has a graspable segment: +-0.6 m actions reach beyond any arm."""
+    cfg = small(seed, max_draws=2, clutter=False)
+    cfg.interaction.actions.amplitude = 0.6
+    return cfg
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("CABLESIM_CACHE", str(tmp_path_factory.getbasetemp() / "robust_cache"))
+
+
+@pytest.fixture(scope="module")
+def seeds_bench():
+    """``benchmarks/seeds.py`` as a module (its per-seed runner)."""
+    import sys
+
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        spec = importlib.util.spec_from_file_location("seeds_bench", BENCHMARKS / "seeds.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        yield mod
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+
+
+# ---------------------------------------------------------------------- named outcomes
+def test_scene_that_will_not_settle_is_a_named_outcome() -> None:
+    ep = simulate_episode(unsettled())
+    r = ep.result
+    assert not r.success and r.outcome == "scene_unsettled"
+    assert "did not settle" in r.reason and "nothing diverged" in r.reason
+    turned = ep.draws["turned_down"]
+    assert [t["draw"] for t in turned] == [0, 1]  # the rule re-drew once, then gave up
+    assert all(t["outcome"] == "scene_unsettled" for t in turned)
+    assert ep.session is None and ep.segment is None
+    ep.close()
+
+
+def test_hose_without_graspable_segment_is_a_named_outcome() -> None:
+    with pytest.raises(NoGraspableSegmentError) as e:
+        SimSession.build(ungraspable())
+    assert isinstance(e.value, UnreachableError)  # what callers caught before
+    assert e.value.outcome == "no_graspable_segment"
+    assert any("end points unreachable" in k for k in e.value.reasons), e.value.reasons
+    ep = simulate_episode(ungraspable())
+    assert not ep.result.success and ep.result.outcome == "no_graspable_segment"
+    assert len(ep.draws["turned_down"]) == 2
+
+
+def test_the_seed_run_records_every_failure_and_goes_on(seeds_bench) -> None:
+    """The seeds benchmark's runner: each failure is a row with its named outcome, including
+    an error nothing anticipated; nothing is raised, so a run over many seeds continues."""
+    rows = [
+        seeds_bench.run_seed(3, config=unsettled().to_dict()),
+        seeds_bench.run_seed(4, config=ungraspable().to_dict()),
+        seeds_bench.run_seed(5, config=small(5, hose=7).to_dict()),  # an invalid hose index
+    ]
+    assert [r["outcome"] for r in rows] == [
+        "scene_unsettled",
+        "no_graspable_segment",
+        "error:ConfigError",
+    ]
+    assert not any(r["success"] for r in rows)
+    assert all(r["cpu_s"] >= 0 and r["reason"] for r in rows)
+    md = seeds_bench.markdown(rows, _meta())
+    assert "0 of 3 gave a successful interaction" in md and "scene_unsettled 1" in md
+
+
+def _meta() -> dict:
+    return {
+        "command": "test",
+        "date": "today",
+        "commit": "x",
+        "machine": "m",
+        "workers": 1,
+        "load_start": "0",
+        "load_end": "0",
+        "cache": "c",
+        "wall_s": 1.0,
+    }
+
+
+def test_explore_writes_a_failed_start_and_does_not_raise(tmp_path) -> None:
+    from cablesim.policies import ExploreConfig
+    from cablesim.policies.explore import explore
+
+    cfg = ExploreConfig(seed=3, episode=unsettled(3), width=160, height=120)
+    res = explore(cfg, out=tmp_path / "ex")
+    assert not res.successes and res.outcome == "scene_unsettled"
+    metrics = json.loads((tmp_path / "ex" / "metrics.json").read_text())
+    assert metrics["outcome"] == "scene_unsettled"
+    assert metrics["stop_reason"].startswith("scene_unsettled")
+    assert [t["draw"] for t in metrics["scene_draws"]["turned_down"]] == [0, 1]
+    assert "outcome: scene_unsettled" in res.summary()
+
+
+def test_outcome_names() -> None:
+    assert failure_outcome("move to pre-grasp: collision in scene: a with b", "x") == "collision"
+    assert failure_outcome("grasp: unreachable (upright hand: no IK)", "x") == "unreachable"
+    assert failure_outcome("action 0 (along) stroke 2/12: IK did not converge", "y") == (
+        "unreachable"
+    )
+    assert failure_outcome("close: nothing held (fingers closed to 0.0 mm)", "g") == "g"
+    assert outcome_of(SceneUnsettledError("x")) == "scene_unsettled"
+    assert outcome_of(KeyError("k")) == "error:KeyError"
+    for name in ("ok", "scene_unsettled", "no_graspable_segment", "grasp_not_held"):
+        assert name in OUTCOMES
+
+
+# ---------------------------------------------------------------------- re-drawing
+SEED_REDRAWN = 7  # two hoses, 160x120: in draw 0 neither hose crosses the other
+
+
+def test_redraw_is_deterministic_and_recorded() -> None:
+    cfg = small(SEED_REDRAWN)
+    a, b = SimSession.build(cfg), SimSession.build(cfg)
+    try:
+        assert a.draws == b.draws >= 2, a.resamples
+        assert a.cfg.scene.draw == a.draws - 1
+        assert "crosses no other hose" in a.resamples[0]["reason"]
+        np.testing.assert_array_equal(a.world.get_state(), b.world.get_state())
+        np.testing.assert_array_equal(a.pick_start().mask, b.pick_start().mask)
+        assert a.hose == b.hose
+        # the hose of interest crosses the other one in the image (the clutter guarantee)
+        K = a.camera.intrinsics
+        polylines = [a.world.hose_vertices(i) for i in range(len(a.world.hoses))]
+        pairs = crossing_pairs(polylines, a.camera.T_world_camera, K.f, K.cx, K.cy, 160, 120)
+        assert crossed_by(pairs, a.hose)
+        # the recorded config rebuilds that draw at once, with the same hose and segment
+        c = SimSession.build(EpisodeConfig.from_dict(json.loads(json.dumps(a.cfg.to_dict()))))
+        assert c.draws == 1 and c.hose == a.hose
+        np.testing.assert_array_equal(c.world.get_state(), a.world.get_state())
+        np.testing.assert_array_equal(c.pick_start().mask, a.pick_start().mask)
+        c.close()
+        # without the clutter rule draw 0 serves
+        d = SimSession.build(small(SEED_REDRAWN, clutter=False))
+        assert d.draws == 1 and d.cfg.scene.draw == 0
+        d.close()
+    finally:
+        a.close()
+        b.close()
+
+
+def test_redraws_use_their_own_streams() -> None:
+    from cablesim.sim.layout import sample_hoses
+
+    scene = small(SEED_REDRAWN).scene_config()
+    d0, d1, d2 = (sample_hoses(scene.replace(draw=k)) for k in range(3))
+    assert d0 != d1 != d2 and d0 != d2
+    assert sample_hoses(scene.replace(draw=1)) == d1
+    a, b = stream(5, "scene_resample", 1), stream(5, "scene_resample", 2)
+    assert a.integers(1 << 30) != b.integers(1 << 30)
+    assert stream(5, "episode").integers(1 << 30) == stream(5, "episode").integers(1 << 30)
+
+
+def test_crossing_pairs_in_the_image() -> None:
+    T = np.eye(4)  # camera at the origin looking along +z
+    f, cx, cy, w, h = 100.0, 50.0, 50.0, 100, 100
+    down = np.array([[0.0, -0.3, 1.0], [0.0, 0.3, 1.0]])
+    across = np.array([[-0.3, 0.0, 1.2], [0.3, 0.0, 1.2]])  # behind it in depth: still crosses
+    beside = np.array([[0.2, -0.3, 1.0], [0.2, 0.3, 1.0]])
+    outside = np.array([[-5.0, 3.0, 1.0], [5.0, 3.0, 1.0]])  # crosses the line out of frame
+    pairs = crossing_pairs([down, across, beside, outside], T, f, cx, cy, w, h)
+    assert pairs == {(0, 1), (1, 2)}
+    assert crossed_by(pairs, 1) == [0, 2] and crossed_by(pairs, 3) == []
+
+
+# ---------------------------------------------------------------------- grasp retries
+SEED_GRASP = 2  # three hoses, 160x120 (the episode tests' scene)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("ground_truth", [True, False])
+def test_a_grasp_that_does_not_hold_is_retried_and_counted(ground_truth: bool) -> None:
+    """With ground truth the hold check fails (zero tolerance); without it (the real robot's
+    path) the fingers close on less than the expected 5 cm.  Either way the runner backs out and
+    re-approaches at +-1 cm along the segment (the seed's ``grasp_retry`` stream picks the side)
+    before it reports ``grasp_not_held``; the arm leaves the scene clean."""
+    icfg = InteractionConfig()
+    icfg.actions.periods = 1
+    icfg.capture.ground_truth = ground_truth
+    if ground_truth:
+        icfg.grasp.hold_tolerance = 1e-9
+    else:
+        icfg.grasp.width, icfg.grasp.epsilon = 0.05, 0.004
+    cfg = small(SEED_GRASP, hoses=3, hose=1, interaction=icfg)
+    session = SimSession.build(cfg)
+    try:
+        r = session.interact(session.pick_start().mask)
+        assert not r.success and r.outcome == "grasp_not_held", r.reason
+        assert r.grasp_retries == 2 and r.to_dict()["grasp_retries"] == 2
+        side = float(stream(SEED_GRASP, "grasp_retry").choice((-1.0, 1.0)))
+        offsets = [a["offset_m"] for a in r.details["grasp"]["attempts"]]
+        assert offsets == pytest.approx([0.0, 0.01 * side, -0.01 * side])
+        assert all(a["result"] != "held" for a in r.details["grasp"]["attempts"])
+        assert session.robot.gripper_opening > 0.07  # released
+        assert not (session.camera.render_labels() == LABEL_ROBOT).any()  # out of view again
+    finally:
+        session.close()
+
+
+def test_no_room_for_the_gripper_where_another_hose_passes_in_front() -> None:
+    """Grasping the rear hose where the other passes in front of it, a finger would land on
+    the front hose (measured: it pushed the hose of interest out of the grasp); further along
+    the rear hose there is room."""
+    from cablesim.sim.picker import _densify, gripper_obstruction
+    from cablesim.sim.world import World
+
+    scene = small(SEED_REDRAWN).scene_config().replace(draw=1)  # its two hoses cross
+    scene.robot.enabled = False
+    world = World.build(scene)
+    a, b = (_densify(world.hose_vertices(i), 0.005) for i in (0, 1))
+    d = np.linalg.norm(a[:, None] - b[None], axis=2)
+    i, j = np.unravel_index(np.argmin(d), d.shape)
+    rear, front = (0, 1) if a[i, 0] > b[j, 0] else (1, 0)  # x grows towards the board
+    pts = a if rear == 0 else b
+    k = i if rear == 0 else j
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    icfg = InteractionConfig()
+
+    def obstruction(n: int) -> str:
+        axis = pts[min(n + 1, len(pts) - 1)] - pts[max(n - 1, 0)]
+        return gripper_obstruction(world, rear, pts[n], axis, (1.0, 0.0, 0.0), icfg, arc[n])
+
+    assert f"would touch hose {front}" in obstruction(k)
+    other = b if rear == 0 else a
+    clear = [
+        n
+        for n in range(len(pts))
+        if np.linalg.norm(other - pts[n], axis=1).min() > 0.25 and 0.1 < arc[n] < arc[-1] - 0.1
+    ]
+    assert clear, "no part of the rear hose far from the front one"
+    assert obstruction(clear[len(clear) // 2]) == ""
+
+
+def test_draw_on_the_command_line() -> None:
+    import argparse
+
+    from cablesim.commands import episode
+    from cablesim.errors import ConfigError
+
+    p = argparse.ArgumentParser()
+    episode.add_arguments(p)
+    cfg = episode.config_from_args(p.parse_args(["--seed", "210", "--draw", "1", "--out", "x"]))
+    assert cfg.scene_config().draw == 1 and cfg.seed == 210
+    with pytest.raises(ConfigError, match="draw"):
+        episode.config_from_args(p.parse_args(["--draw", "-1", "--out", "x"]))
