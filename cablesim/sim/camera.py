@@ -103,6 +103,13 @@ class SimSnapshot:
 
         return RodGeometry.from_snapshot(self)
 
+    @cached_property
+    def flow_source(self) -> Any:
+        """What ground-truth flow *from* this snapshot needs of it alone (computed once)."""
+        from cablesim.sim.flow_gt import SourcePixels
+
+        return SourcePixels.from_snapshot(self)
+
 
 class SimCamera(Camera):
     """Renders ``world``'s fixed camera offscreen.  Size defaults to ``world.cfg.camera``."""
