@@ -50,6 +50,8 @@ _WARNINGS = (
 )
 
 
+_WARNING_INDEX = np.array([int(w) for w in _WARNINGS])
+
 StepHook = Callable[["World"], None]
 
 
@@ -302,8 +304,9 @@ class World:
         ``PhysicsDivergedError`` if the physics blew up."""
         m, d = self.model, self.data
         if not (self.before_step or self.after_step):
-            for _ in range(n):
-                mujoco.mj_step(m, d)
+            if n > 0:
+                # a blow-up inside the batch resets the data and counts a warning: caught below
+                mujoco.mj_step(m, d, n)
             self.check_diverged()
             return
         for _ in range(n):
@@ -331,10 +334,10 @@ class World:
 
     def check_diverged(self) -> None:
         d = self.data
-        counts = np.array([d.warning[w].number for w in _WARNINGS])
+        counts = d.warning.number[_WARNING_INDEX]
         bad = counts > self._warn_counts
         self._warn_counts = counts
-        if bad.any() or not np.isfinite(d.qpos).all() or not np.isfinite(d.qvel).all():
+        if bad.any() or not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
             names = [w.name for w, b in zip(_WARNINGS, bad, strict=True) if b]
             raise PhysicsDivergedError(
                 f"physics diverged at t={d.time:.3f}s "
@@ -365,7 +368,7 @@ class World:
             self._set_start_shapes()
         else:
             self.set_state(self._settled_state)
-        self._warn_counts = np.array([self.data.warning[w].number for w in _WARNINGS])
+        self._warn_counts = self.data.warning.number[_WARNING_INDEX]
 
     # ------------------------------------------------------------------ hoses
     def hose_vertices(self, i: int) -> np.ndarray:
