@@ -162,9 +162,25 @@ class RobotConfig:
             raise ConfigError("robot.park_qpos", f"expected 7 joint angles, got {self.park_qpos}")
 
 
+SOLVERS = ("Newton", "CG")
+
+
 @dataclass
 class PhysicsConfig:
+    """MuJoCo options of the scene.
+
+    ``solver``: Newton converges in one or two iterations per step in most states of this
+    scene, but MuJoCo 4.0's Newton stalls at its iteration limit in some hose-on-hose contact
+    states (then the hoses jitter and never settle: measured up to 170 mm/s after 6 s).  With
+    ``fallback_time`` > 0 such a step is redone with CG, which converges there, and CG goes on
+    for ``fallback_time`` seconds of simulated time before Newton resumes; 0 keeps Newton's
+    unconverged steps.  ``solver`` CG uses CG throughout (robust against the stall, but 2x the
+    cost per step and unstable in other states).
+    """
+
     timestep: float = 0.004
+    solver: str = "Newton"  # one of SOLVERS
+    fallback_time: float = 1.0  # s of CG after a Newton step that did not converge
     settle_speed: float = 0.001  # m/s: settled when every hose vertex is slower than this
     settle_max_time: float = 20.0  # simulated seconds before giving up
     settle_check_every: float = 0.1
@@ -174,6 +190,9 @@ class PhysicsConfig:
     def validate(self) -> None:
         if not 0 < self.timestep <= 0.016:
             raise ConfigError("physics.timestep", f"must be in (0, 0.016] s, got {self.timestep}")
+        if self.solver not in SOLVERS:
+            raise ConfigError("physics.solver", f"must be one of {SOLVERS}, got {self.solver!r}")
+        check_positive("physics.fallback_time", self.fallback_time, allow_zero=True)
         check_positive("physics.settle_speed", self.settle_speed)
         check_positive("physics.settle_max_time", self.settle_max_time)
         check_positive("physics.settle_check_every", self.settle_check_every)

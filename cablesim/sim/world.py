@@ -51,6 +51,8 @@ _WARNINGS = (
 
 
 _WARNING_INDEX = np.array([int(w) for w in _WARNINGS])
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
+_SOLVERS = {"Newton": int(mujoco.mjtSolver.mjSOL_NEWTON), "CG": int(mujoco.mjtSolver.mjSOL_CG)}
 
 StepHook = Callable[["World"], None]
 
@@ -137,8 +139,8 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     return f"""
 <mujoco model="cablesim_task_board">
   <compiler angle="radian" autolimits="true"/>
-  <option timestep="{cfg.physics.timestep}" integrator="discrete" gravity="0 0 {cfg.physics.gravity}"
-          cone="elliptic" impratio="10"/>
+  <option timestep="{cfg.physics.timestep!r}" integrator="discrete" gravity="0 0 {cfg.physics.gravity}"
+          cone="elliptic" impratio="10" solver="{cfg.physics.solver}"/>
   <size memory="64M"/>
   <visual>
     <global offwidth="{max(1280, cfg.camera.width)}" offheight="{max(720, cfg.camera.height)}"/>
@@ -222,6 +224,11 @@ class World:
         self.T_world_camera = T
         self._warn_counts = np.zeros(len(_WARNINGS), int)
         self._settled_state: np.ndarray | None = None
+        # Newton with CG standing in where Newton stalls (see PhysicsConfig and _advance)
+        self._solver = int(model.opt.solver)
+        self._fallback_steps = 0
+        self._fallbacks = 0  # how often CG stood in since the last reset
+        self._step_state = np.empty(mujoco.mj_stateSize(model, _STATE))
         self.before_step: list[StepHook] = []
         self.after_step: list[StepHook] = []
 
@@ -302,20 +309,55 @@ class World:
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps, running the step hooks around each; raise
         ``PhysicsDivergedError`` if the physics blew up."""
-        m, d = self.model, self.data
         if not (self.before_step or self.after_step):
-            if n > 0:
-                # a blow-up inside the batch resets the data and counts a warning: caught below
-                mujoco.mj_step(m, d, n)
+            for _ in range(n):
+                # a blow-up resets the data and counts a warning: caught below
+                self._advance()
             self.check_diverged()
             return
         for _ in range(n):
             for hook in tuple(self.before_step):
                 hook(self)
-            mujoco.mj_step(m, d)
+            self._advance()
             self.check_diverged()
             for hook in tuple(self.after_step):
                 hook(self)
+
+    def _advance(self) -> None:
+        """One physics step.  With ``physics.solver`` Newton: if Newton stops converging (it
+        hits its iteration limit, which MuJoCo 4.0's Newton does in some hose-on-hose contact
+        states and then leaves the hoses jittering), the step is redone from the same state
+        with CG, and CG keeps stepping for ``physics.fallback_time`` before Newton resumes.
+        Both solve the same convex problem; this only picks the one that converges."""
+        m, d = self.model, self.data
+        if self._fallback_steps > 0:
+            mujoco.mj_step(m, d)
+            self._fallback_steps -= 1
+            if self._fallback_steps == 0:
+                m.opt.solver = self._solver
+            return
+        fallback = self.cfg.physics.fallback_time
+        if m.opt.solver != _SOLVERS["Newton"] or fallback <= 0:
+            mujoco.mj_step(m, d)
+            return
+        mujoco.mj_getState(m, d, self._step_state, _STATE)
+        mujoco.mj_step(m, d)
+        if d.solver_niter[: max(1, d.nisland)].max() < m.opt.iterations:
+            return
+        mujoco.mj_setState(m, d, self._step_state, _STATE)
+        m.opt.solver = _SOLVERS["CG"]
+        self._fallbacks += 1
+        self._fallback_steps = max(1, round(fallback / m.opt.timestep))
+        mujoco.mj_step(m, d)
+        self._fallback_steps -= 1
+        if self._fallback_steps == 0:
+            m.opt.solver = self._solver
+
+    @property
+    def solver_fallbacks(self) -> int:
+        """How often CG stood in for a Newton step that did not converge since the last reset
+        (see ``_advance``)."""
+        return self._fallbacks
 
     @contextmanager
     def hooks(
@@ -364,6 +406,8 @@ class World:
 
     def reset(self) -> None:
         """Back to the settled state (bit for bit)."""
+        self.model.opt.solver = self._solver
+        self._fallback_steps = self._fallbacks = 0
         if self._settled_state is None:
             self._set_start_shapes()
         else:
