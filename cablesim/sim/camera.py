@@ -158,13 +158,15 @@ class SimCamera(Camera):
         fovy = float(m.cam_fovy[world.camera_id])
         self._intrinsics = intrinsics_from_fovy(self.width, self.height, fovy)
         # multisampling costs 2-3x on software OpenGL and blurs label boundaries: off by
-        # default (the model's setting is restored once the renderer exists)
-        samples = m.vis.quality.offsamples
+        # default; sphere and capsule-cap tessellation from the camera config (the model's
+        # settings are restored once the renderer exists, which keeps the tessellation)
+        samples, stacks = m.vis.quality.offsamples, m.vis.quality.numstacks
         m.vis.quality.offsamples = int(antialias_samples)
+        m.vis.quality.numstacks = int(c.sphere_stacks)
         try:
             self._renderer: mujoco.Renderer | None = mujoco.Renderer(m, self.height, self.width)
         finally:
-            m.vis.quality.offsamples = samples
+            m.vis.quality.offsamples, m.vis.quality.numstacks = samples, stacks
         self._option = _camera_option()
         self._antialias = int(antialias_samples)
         self._layers = self._layer_options() if layered else None

@@ -128,6 +128,12 @@ class CameraConfig:
     depth_noise_std_per_m2: float = 0.0015  # RealSense-like: sigma = k * z^2
     near: float = 0.05
     far: float = 5.0
+    # stacks of the rendered spheres and capsule caps (MuJoCo's default is 16).  A hose is
+    # drawn as one capsule per edge whose caps hide inside the neighbouring edges, so 8 stacks
+    # cost 25% less rendering and change only a few pixels at hose ends: 21 of 307,200 (at
+    # most one grey level, no label) on the seed-2 start image; with the arm in view also
+    # ~1,400 pixels on its capsule ends.  16 renders exactly as MuJoCo's default.
+    sphere_stacks: int = 8
 
     def validate(self) -> None:
         if not (16 <= self.width <= 1280 and 16 <= self.height <= 720):
@@ -142,6 +148,14 @@ class CameraConfig:
         check_positive("camera.depth_noise_std_per_m2", self.depth_noise_std_per_m2, True)
         if not 0 < self.near < self.far:
             raise ConfigError("camera.near", "need 0 < near < far")
+        if (
+            isinstance(self.sphere_stacks, bool)
+            or not isinstance(self.sphere_stacks, int)
+            or not 2 <= self.sphere_stacks <= 64
+        ):
+            raise ConfigError(
+                "camera.sphere_stacks", f"must be an integer in 2..64, got {self.sphere_stacks!r}"
+            )
 
 
 @dataclass

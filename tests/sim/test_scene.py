@@ -40,6 +40,7 @@ def _cfg(**kw) -> SceneConfig:
         (SceneConfig(camera=CameraConfig(width=1920, height=1080)), "camera.width/height"),
         (SceneConfig(physics=PhysicsConfig(timestep=0.05)), "physics.timestep"),
         (SceneConfig(physics=PhysicsConfig(solver="PGS")), "physics.solver"),
+        (SceneConfig(camera=CameraConfig(sphere_stacks=1)), "camera.sphere_stacks"),
         (SceneConfig(physics=PhysicsConfig(fallback_time=-1.0)), "physics.fallback_time"),
         (SceneConfig(seed=-1), "seed"),
     ],

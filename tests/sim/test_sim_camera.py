@@ -204,3 +204,24 @@ def test_layered_rendering_gives_the_pixels_of_a_full_render():
     # multisampling blends the layers at their edges: such a camera renders in one pass
     with SimCamera(world, antialias_samples=4) as aa:
         assert not aa.layered
+
+
+def test_coarser_sphere_caps_change_almost_no_pixel(world: World):
+    """8 stacks per sphere (the default, for speed) instead of MuJoCo's 16: the hoses' capsule
+    caps hide inside the neighbouring edges, so only a few pixels at hose ends change."""
+    import dataclasses
+
+    with SimCamera(world) as cam:
+        coarse = cam.snapshot()
+    world.cfg.camera = dataclasses.replace(world.cfg.camera, sphere_stacks=16)
+    try:
+        with SimCamera(world) as cam:
+            fine = cam.snapshot()
+    finally:
+        world.cfg.camera = dataclasses.replace(world.cfg.camera, sphere_stacks=8)
+    assert world.model.vis.quality.numstacks == 16  # the model's own setting is kept
+    labels = coarse.labels != fine.labels
+    changed = np.abs(coarse.rgb.astype(int) - fine.rgb.astype(int)).max(-1) > 0
+    print(f"{changed.sum()} pixels and {labels.sum()} labels of {changed.size} changed")
+    assert changed.any()  # the setting is in effect
+    assert changed.mean() < 1e-3 and labels.mean() < 2e-4
