@@ -14,10 +14,10 @@ come from one render pass, labels from a second one.
 The camera is fixed, so what is welded to the world (board, table, connectors, the sky) looks
 the same in every frame: it is rendered once per camera (the background layer), and each
 colour pass draws only what can move (hoses, robot) and takes, per pixel, the nearer of the two
-layers by their depth buffers.  With opaque, unlit-by-each-other geometry (no shadows,
-reflections, transparency or multisampling, which MuJoCo's renderer would blend across the
-layers) this gives the very pixels of a full render, bit for bit, for less than half the
-software-rendering work; otherwise every pass is a full render.
+layers by their depth buffers.  Where no geometry affects how other geometry looks (opaque
+materials, lights fixed to the world, no shadows, reflections or multisampling) this gives the
+very pixels of a full render, bit for bit, for about a third less work per colour pass;
+otherwise every pass is a full render.
 
 The optional depth noise (``cfg.camera.depth_noise``) is RealSense-like: Gaussian with
 sigma = k z^2, 1 mm quantisation, and dropped pixels (0) at depth discontinuities; it is
@@ -341,6 +341,8 @@ class SimCamera(Camera):
             return None
         if m.vis.quality.shadowsize > 0 and m.light_castshadow.any():
             return None
+        if (m.body_weldid[m.light_bodyid] != 0).any():
+            return None  # a light that moves changes how the background looks
         opaque = (m.geom_rgba[:, 3] >= 1).all() and (m.flex_rgba[:, 3] >= 1).all()
         if not opaque or (m.mat_rgba[:, 3] < 1).any():
             return None
