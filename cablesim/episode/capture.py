@@ -63,8 +63,10 @@ class FrameCollector:
         self._lock = threading.Lock()
         self.ticks = 0
         self.skews: list[float] = []
-        self.render_time = 0.0
-        self.truth_time = 0.0
+        self.render_time = 0.0  # wall seconds spent grabbing (rendering) kept frames
+        self.truth_time = 0.0  # wall seconds spent on ground truth (flow)
+        self.render_cpu = 0.0  # the same in CPU seconds of this process
+        self.truth_cpu = 0.0
         self.mask_time = 0.0
 
     # ------------------------------------------------------------------ actions
@@ -90,9 +92,10 @@ class FrameCollector:
             if self._last is not None and np.linalg.norm(tcp.position - self._last) < self.min_step:
                 return
             self._last = tcp.position
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             image = tick.image()
             self.render_time += time.perf_counter() - t0
+            self.render_cpu += time.process_time() - c0
             self.skews.append(float(tick.skew))
             self._emit(self._frame(image, tcp, tick, self.action, self._sample))
             self._sample += 1
@@ -100,9 +103,10 @@ class FrameCollector:
     # ------------------------------------------------------------------ target
     def capture_target(self, grab: Callable[[], CameraImage], tick: Tick) -> Frame:
         """The target frame: grabbed now, with the gripper state of ``tick``."""
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         image = grab()
         self.render_time += time.perf_counter() - t0
+        self.render_cpu += time.process_time() - c0
         tcp = pose_in_camera(self.T, tick.gripper)
         frame = self._frame(image, tcp, tick, TARGET_ACTION, 0)
         self._emit(frame)
@@ -111,15 +115,18 @@ class FrameCollector:
     def finish(self, say: Callable[[str], None]) -> None:
         """Ground-truth flow from the target frame to every action frame (with truth)."""
         if self.truth is not None:
+            c0 = time.process_time()
             self.truth_time += self.truth.finish(self.frames, self.sink, say)
+            self.truth_cpu += time.process_time() - c0
 
     # ------------------------------------------------------------------ internals
     def _frame(self, image: CameraImage, tcp: Pose, tick: Tick, action: int, sample: int) -> Frame:
         truth = None
         if self.truth is not None:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             truth = self.truth.frame_truth(image)
             self.render_time += time.perf_counter() - t0
+            self.render_cpu += time.process_time() - c0
         mask = None
         if self.arm_mask is not None:
             t0 = time.perf_counter()

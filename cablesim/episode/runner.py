@@ -171,7 +171,11 @@ class InteractionResult:
             f"  target frame: {self.target_robot_pixels} robot pixels; "
             f"{self.details.get('still', '')}"
         )
-        lines.append("  wall time: " + ", ".join(f"{k} {v:.1f} s" for k, v in self.timings.items()))
+        wall = {k: v for k, v in self.timings.items() if not k.startswith("cpu_")}
+        cpu = {k[4:]: v for k, v in self.timings.items() if k.startswith("cpu_")}
+        lines.append("  wall time: " + ", ".join(f"{k} {v:.1f} s" for k, v in wall.items()))
+        if cpu:
+            lines.append("  CPU time: " + ", ".join(f"{k} {v:.1f} s" for k, v in cpu.items()))
         return "\n".join(lines)
 
 
@@ -237,7 +241,7 @@ def run_interaction(
     """
     cfg = (config or InteractionConfig()).validate()
     say = say or quiet
-    t_start = time.perf_counter()
+    t_start, c_start = time.perf_counter(), time.process_time()
     approach = np.asarray(prim.DEFAULT_APPROACH, float)
     T = np.asarray(
         camera.T_world_camera if camera.T_world_camera is not None else robot.T_world_camera, float
@@ -350,12 +354,16 @@ def run_interaction(
     collector.finish(say)
     result.stream = Stream(collector.frames, meta=_stream_meta(cfg, result, directions, T))
     result.success, result.outcome = True, "ok"
-    total = time.perf_counter() - t_start
+    total, cpu = time.perf_counter() - t_start, time.process_time() - c_start
     result.timings.update(
         total=total,
         rendering=collector.render_time,
         ground_truth=collector.truth_time,
         physics_control=total - collector.render_time - collector.truth_time,
+        cpu_total=cpu,
+        cpu_rendering=collector.render_cpu,
+        cpu_ground_truth=collector.truth_cpu,
+        cpu_physics_control=cpu - collector.render_cpu - collector.truth_cpu,
     )
     result.details["ticks"] = collector.ticks
     if collector.skews:

@@ -156,35 +156,44 @@ def edge_rotations(
     default) are computed; the other edges get the identity."""
     n = len(src.a)
     R = np.tile(np.eye(3), (n, 1, 1))
-    for h in range(len(src.verts)) if hoses is None else (int(x) for x in hoses):
+    sel = range(len(src.verts)) if hoses is None else [int(x) for x in hoses]
+    if not len(sel):
+        return R
+    # every requested hose at once: edge e (global) of hose h has the neighbourhood vertices
+    # e + h + (-1 .. 2), clipped to the hose, in the concatenated vertex arrays
+    idx, edges = [], []
+    for h in sel:
         vs, vd = src.verts[h], dst.verts[h]
         if vs.shape != vd.shape:
             raise InputError("the two snapshots have hoses with different vertex counts")
         n_e = len(vs) - 1
         k = np.arange(n_e)
-        idx = np.clip(k[:, None] + np.arange(-1, 3)[None, :], 0, len(vs) - 1)  # (n_e, 4)
-        ps, pd = vs[idx], vd[idx]
-        ps = ps - ps.mean(1, keepdims=True)
-        pd = pd - pd.mean(1, keepdims=True)
-        H = np.einsum("nki,nkj->nij", ps, pd)
-        U, S, Vt = np.linalg.svd(H)
-        d = np.sign(np.linalg.det(np.einsum("nij,njk->nik", U, Vt)).T)
-        d[d == 0] = 1
-        D = np.ones((n_e, 3))
-        D[:, 2] = d
-        fit = np.einsum("nji,nj,nkj->nik", Vt, D, U)  # V diag(d) U^T
-        ts, td = _unit(vs[1:] - vs[:-1]), _unit(vd[1:] - vd[:-1])
-        sv_s = np.linalg.svd(ps, compute_uv=False)
-        sv_d = np.linalg.svd(pd, compute_uv=False)
-        straight = (sv_s[:, 1] <= STRAIGHT_RATIO * np.maximum(sv_s[:, 0], 1e-18)) | (
-            sv_d[:, 1] <= STRAIGHT_RATIO * np.maximum(sv_d[:, 0], 1e-18)
-        )
-        corr = _min_rotation(_unit(np.einsum("nij,nj->ni", fit, ts)), td)
-        bend = np.einsum("nij,njk->nik", corr, fit)
-        bend[straight] = _min_rotation(ts[straight], td[straight])
-        sl = slice(src.edge_start[h], src.edge_start[h + 1])
-        twist = _axis_rotation(td, dst.twist[sl] - src.twist[sl])
-        R[sl] = np.einsum("nij,njk->nik", twist, bend)
+        v0 = int(src.edge_start[h]) + h  # first vertex of hose h in the concatenation
+        idx.append(v0 + np.clip(k[:, None] + np.arange(-1, 3)[None, :], 0, n_e))
+        edges.append(int(src.edge_start[h]) + k)
+    idx_all, e = np.concatenate(idx), np.concatenate(edges)
+    ps = np.concatenate(src.verts)[idx_all]
+    pd = np.concatenate(dst.verts)[idx_all]
+    ps = ps - ps.mean(1, keepdims=True)
+    pd = pd - pd.mean(1, keepdims=True)
+    H = np.einsum("nki,nkj->nij", ps, pd)
+    U, S, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.einsum("nij,njk->nik", U, Vt)).T)
+    d[d == 0] = 1
+    D = np.ones((len(e), 3))
+    D[:, 2] = d
+    fit = np.einsum("nji,nj,nkj->nik", Vt, D, U)  # V diag(d) U^T
+    ts, td = _unit(src.b[e] - src.a[e]), _unit(dst.b[e] - dst.a[e])
+    sv_s = np.linalg.svd(ps, compute_uv=False)
+    sv_d = np.linalg.svd(pd, compute_uv=False)
+    straight = (sv_s[:, 1] <= STRAIGHT_RATIO * np.maximum(sv_s[:, 0], 1e-18)) | (
+        sv_d[:, 1] <= STRAIGHT_RATIO * np.maximum(sv_d[:, 0], 1e-18)
+    )
+    corr = _min_rotation(_unit(np.einsum("nij,nj->ni", fit, ts)), td)
+    bend = np.einsum("nij,njk->nik", corr, fit)
+    bend[straight] = _min_rotation(ts[straight], td[straight])
+    twist = _axis_rotation(td, dst.twist[e] - src.twist[e])
+    R[e] = np.einsum("nij,njk->nik", twist, bend)
     return R
 
 
@@ -199,6 +208,73 @@ def _check_pair(src: SimSnapshot, dst: SimSnapshot) -> None:
         raise InputError("snapshots come from different models (body counts differ)")
 
 
+@dataclass(frozen=True)
+class SourcePixels:
+    """What :func:`gt_flow` needs of its *source* snapshot alone, computed once per snapshot
+    (``SimSnapshot.flow_source``): ``flow_to_target`` uses the target frame as the source of
+    every flow of an interaction, so this work is shared by all of them.
+
+    The candidates are the seen pixels that can move: hose pixels and pixels of geoms on a body
+    other than the world, in raster order.  Hose candidates come first in ``hose_*`` order
+    (their positions among the candidates are ``hose_index``)."""
+
+    vv: np.ndarray  # (N,) row of each candidate
+    uu: np.ndarray  # (N,) column
+    label: np.ndarray  # (N,) int64 label (hose index >= 0, else < 0)
+    body: np.ndarray  # (N,) int64 body id (-1 on hoses)
+    X: np.ndarray  # (N, 3) world point seen at the pixel
+    is_hose: np.ndarray  # (N,) bool
+    # hose candidates only, in candidate order
+    edge: np.ndarray  # (Nh,) global edge of the point's own hose
+    tau: np.ndarray  # (Nh,) parameter along it
+    base: np.ndarray  # (Nh, 3) the point's foot on the edge (world)
+    offset: np.ndarray  # (Nh, 3) X - base
+    normal: np.ndarray  # (Nh, 2) image-space boundary normal (unit)
+    # per pixel, for the in-place visibility of static pixels
+    depth_tol: np.ndarray  # HxW float32: DEPTH_TOL_ABS + DEPTH_TOL_REL * depth
+
+    @staticmethod
+    def from_snapshot(src: SimSnapshot) -> SourcePixels:
+        K = src.intrinsics
+        seen = src.depth > 0
+        labels = src.labels.astype(np.int64)
+        cand = seen & ((labels >= 0) | ((labels < 0) & (src.body >= 1)))
+        vv, uu = np.nonzero(cand)
+        label = labels[vv, uu]
+        body = src.body[vv, uu].astype(np.int64)
+        is_hose = label >= 0
+        T = src.T_world_camera
+        X = np.zeros((len(vv), 3))
+        if len(vv):
+            P = K.backproject(np.stack([uu, vv], -1), src.depth[vv, uu])
+            X = P @ T[:3, :3].T + T[:3, 3]
+        rs = src.rod
+        Xh = X[is_hose]
+        edge, tau = rs.nearest_edges(Xh, label[is_hose])
+        base = rs.a[edge] + tau[:, None] * (rs.b[edge] - rs.a[edge])
+        # image-space tangent of the edge at the point: d/ds of the projection of base + s * t
+        Pc = (base - T[:3, 3]) @ T[:3, :3]
+        tc = (rs.b[edge] - rs.a[edge]) @ T[:3, :3]
+        z = np.maximum(Pc[:, 2], 1e-9)
+        du = K.fx * (tc[:, 0] * z - Pc[:, 0] * tc[:, 2]) / z**2
+        dv = K.fy * (tc[:, 1] * z - Pc[:, 1] * tc[:, 2]) / z**2
+        normal = _unit(np.stack([-dv, du], -1))
+        return SourcePixels(
+            vv,
+            uu,
+            label,
+            body,
+            X,
+            is_hose,
+            edge,
+            tau,
+            base,
+            Xh - base,
+            normal,
+            DEPTH_TOL_ABS + DEPTH_TOL_REL * src.depth,
+        )
+
+
 def gt_flow(src: SimSnapshot, dst: SimSnapshot) -> GTFlow:
     """Exact flow from ``src`` pixels to ``dst`` (see module docstring)."""
     from cablesim.sim.camera import SimSnapshot
@@ -210,7 +286,7 @@ def gt_flow(src: SimSnapshot, dst: SimSnapshot) -> GTFlow:
     h, w = src.shape
     flow = np.zeros((h, w, 2), np.float32)
     normal_flow = np.zeros((h, w, 2), np.float32)
-    target_uv = None
+    sp: SourcePixels = src.flow_source
 
     # which pixels move: hose pixels, and geom pixels of bodies whose pose changed
     moved_body = np.any(np.abs(src.body_pos - dst.body_pos) > 0, axis=1) | np.any(
@@ -223,66 +299,65 @@ def gt_flow(src: SimSnapshot, dst: SimSnapshot) -> GTFlow:
             for vs, vd, ts, td in zip(
                 src.hose_vertices, dst.hose_vertices, src.hose_twist, dst.hose_twist, strict=True
             )
-        ]
-        + [False]
+        ],
+        bool,
     )
-    seen = src.depth > 0
-    cam_moved = not np.array_equal(src.T_world_camera, dst.T_world_camera)
-    if cam_moved:  # a moving camera makes every visible pixel move
-        moved_hose[:] = True
+    if not np.array_equal(src.T_world_camera, dst.T_world_camera):
+        moved_hose[:] = True  # a moving camera makes every visible pixel move
         moved_body[:] = True
-    # look-up tables indexed by label + 2 (labels >= -2) and body + 1 (body >= -1)
-    hose_lut = np.concatenate([[False, False], moved_hose[:-1]])
-    body_lut = np.concatenate([[False], moved_body])
-    hose_px = hose_lut[src.labels.astype(np.int64) + 2] & seen
-    body_px = body_lut[src.body.astype(np.int64) + 1] & seen & (src.labels < 0)
-    static_px = ~(hose_px | body_px)
-
-    Ts, Td = src.T_world_camera, dst.T_world_camera
-    moving = hose_px | body_px
-    vv, uu = np.nonzero(moving)
-    Y = np.zeros((len(vv), 3))
-    hv = np.zeros(len(vv), bool)
-    normals = None
-    if len(vv):
-        P = K.backproject(np.stack([uu, vv], -1), src.depth[vv, uu])
-        X = P @ Ts[:3, :3].T + Ts[:3, 3]
-        hv = hose_px[vv, uu]
-        if hv.any():
-            Y[hv], normals = _carry_hose(src, dst, X[hv], src.labels[vv[hv], uu[hv]])
-        bv = ~hv
-        if bv.any():
-            b = src.body[vv[bv], uu[bv]]
-            local = np.einsum("nji,nj->ni", src.body_mat[b], X[bv] - src.body_pos[b])
-            Y[bv] = np.einsum("nij,nj->ni", dst.body_mat[b], local) + dst.body_pos[b]
-        Q = (Y - Td[:3, 3]) @ Td[:3, :3]
-        target_uv = K.project(Q)
-        f = (target_uv - np.stack([uu, vv], -1)).astype(np.float32)
-        flow[vv, uu] = f
-        if normals is not None:
-            fh = f[hv]
-            nf = np.einsum("ij,ij->i", fh, normals)[:, None] * normals
-            normal_flow[vv[hv], uu[hv]] = nf.astype(np.float32)
+    hose_moves = moved_hose[np.maximum(sp.label[sp.is_hose], 0)]
+    moving = np.zeros(len(sp.vv), bool)
+    moving[sp.is_hose] = hose_moves
+    not_hose = ~sp.is_hose
+    moving[not_hose] = moved_body[sp.body[not_hose]]
 
     # static pixels: visible in dst if dst shows the same kind of thing at the same depth
-    valid = _visible_in_place(src, dst) & static_px
-    if len(vv):
-        tu, tv = target_uv[:, 0], target_uv[:, 1]
-        inside = (tu > -0.5) & (tu < w - 0.5) & (tv > -0.5) & (tv < h - 0.5)
-        ok = np.zeros(len(vv), bool)
-        ui = np.clip(np.rint(tu), 0, w - 1).astype(np.int64)
-        vi = np.clip(np.rint(tv), 0, h - 1).astype(np.int64)
-        ok[inside] = _visible(
-            src.labels[vv[inside], uu[inside]], Q[inside, 2], dst, ui[inside], vi[inside]
-        )
-        valid[vv, uu] = ok
+    valid = _visible_in_place(src, dst, sp.depth_tol)
+    if not moving.any():
+        return GTFlow(flow, valid, normal_flow)
+
+    Td = dst.T_world_camera
+    vv, uu = sp.vv[moving], sp.uu[moving]
+    hv = sp.is_hose[moving]
+    Y = np.zeros((len(vv), 3))
+    normals = None
+    if hv.any():
+        Y[hv] = _carry_hose(src, dst, sp, hose_moves)
+        normals = sp.normal[hose_moves]
+    bv = ~hv
+    if bv.any():
+        sel = moving & not_hose
+        b = sp.body[sel]
+        local = np.einsum("nji,nj->ni", src.body_mat[b], sp.X[sel] - src.body_pos[b])
+        Y[bv] = np.einsum("nij,nj->ni", dst.body_mat[b], local) + dst.body_pos[b]
+    Q = (Y - Td[:3, 3]) @ Td[:3, :3]
+    target_uv = K.project(Q)
+    f = (target_uv - np.stack([uu, vv], -1)).astype(np.float32)
+    flow[vv, uu] = f
+    if normals is not None:
+        fh = f[hv]
+        nf = np.einsum("ij,ij->i", fh, normals)[:, None] * normals
+        normal_flow[vv[hv], uu[hv]] = nf.astype(np.float32)
+
+    tu, tv = target_uv[:, 0], target_uv[:, 1]
+    inside = (tu > -0.5) & (tu < w - 0.5) & (tv > -0.5) & (tv < h - 0.5)
+    ok = np.zeros(len(vv), bool)
+    ui = np.clip(np.rint(tu), 0, w - 1).astype(np.int64)
+    vi = np.clip(np.rint(tv), 0, h - 1).astype(np.int64)
+    ok[inside] = _visible(
+        src.labels[vv[inside], uu[inside]], Q[inside, 2], dst, ui[inside], vi[inside]
+    )
+    valid[vv, uu] = ok
     return GTFlow(flow, valid, normal_flow)
 
 
-def _visible_in_place(src: SimSnapshot, dst: SimSnapshot) -> np.ndarray:
+def _visible_in_place(
+    src: SimSnapshot, dst: SimSnapshot, depth_tol: np.ndarray | None = None
+) -> np.ndarray:
     """Per pixel: does dst show what src shows at the same pixel (same label, same depth)?"""
     zs, zd = src.depth, dst.depth
-    near = np.abs(zd - zs) <= DEPTH_TOL_ABS + DEPTH_TOL_REL * zs
+    tol = DEPTH_TOL_ABS + DEPTH_TOL_REL * zs if depth_tol is None else depth_tol
+    near = np.abs(zd - zs) <= tol
     return (src.labels == dst.labels) & ((near & (zd > 0)) | ((zd == 0) & (zs == 0)))
 
 
@@ -296,26 +371,16 @@ def _visible(
 
 
 def _carry_hose(
-    src: SimSnapshot, dst: SimSnapshot, X: np.ndarray, hose: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """World points in dst of hose surface points ``X`` of src, and src image-space boundary
-    normals (unit, (N, 2)) at them."""
+    src: SimSnapshot, dst: SimSnapshot, sp: SourcePixels, moves: np.ndarray
+) -> np.ndarray:
+    """World points in dst of the hose candidates of ``sp`` selected by ``moves``: each point
+    keeps its parameter on its edge and its offset from the axis, rotated with the edge."""
     rs, rd = src.rod, dst.rod
-    edge, tau = rs.nearest_edges(X, hose)
-    R = edge_rotations(rs, rd, np.unique(hose))[edge]
-    base_s = rs.a[edge] + tau[:, None] * (rs.b[edge] - rs.a[edge])
+    edge, tau = sp.edge[moves], sp.tau[moves]
+    hoses = np.unique(sp.label[sp.is_hose][moves])
+    R = edge_rotations(rs, rd, hoses)[edge]
     base_d = rd.a[edge] + tau[:, None] * (rd.b[edge] - rd.a[edge])
-    Y = base_d + np.einsum("nij,nj->ni", R, X - base_s)
-    # image-space tangent of the edge at the point: d/ds of the projection of base + s * t
-    T = src.T_world_camera
-    K = src.intrinsics
-    Pc = (base_s - T[:3, 3]) @ T[:3, :3]
-    tc = (rs.b[edge] - rs.a[edge]) @ T[:3, :3]
-    z = np.maximum(Pc[:, 2], 1e-9)
-    du = K.fx * (tc[:, 0] * z - Pc[:, 0] * tc[:, 2]) / z**2
-    dv = K.fy * (tc[:, 1] * z - Pc[:, 1] * tc[:, 2]) / z**2
-    n = _unit(np.stack([-dv, du], -1))
-    return Y, n
+    return base_d + np.einsum("nij,nj->ni", R, sp.offset[moves])
 
 
 def flow_to_target(frame: SimSnapshot, target: SimSnapshot) -> GTFlow:

@@ -114,6 +114,7 @@ class SimPanda(ArmModelChecks, Robot):
         self._qadr = joint_qpos_addresses(m, n.joints)
         self._dofadr = np.asarray([m.jnt_dofadr[m.joint(j).id] for j in n.joints])
         self._finger_qadr = joint_qpos_addresses(m, n.finger_joints)
+        self._finger_dofadr = np.asarray([m.jnt_dofadr[m.joint(j).id] for j in n.finger_joints])
         self._act = np.asarray([m.actuator(a).id for a in n.actuators])
         self._gripper = m.actuator(n.gripper_actuator).id
         self._site = m.site(n.site).id
@@ -232,14 +233,23 @@ class SimPanda(ArmModelChecks, Robot):
     def _static_collision(self) -> str:
         """Name pair of a robot/static-geom contact deeper than the configured depth, or ''."""
         m, d = self.world.model, self.world.data
-        for c in d.contact[: d.ncon]:
-            g1, g2 = int(c.geom[0]), int(c.geom[1])
-            if g1 < 0 or g2 < 0 or c.dist > -self.config.collision_depth:
-                continue
-            r1, r2 = self._robot_geom[g1], self._robot_geom[g2]
-            if (r1 and self._static_geom[g2]) or (r2 and self._static_geom[g1]):
-                return f"{m.geom(g1).name} with {m.geom(g2).name}"
-        return ""
+        if d.ncon == 0:
+            return ""
+        contacts = d.contact
+        geom, dist = contacts.geom, contacts.dist
+        g1, g2 = geom[:, 0], geom[:, 1]
+        deep = (g1 >= 0) & (g2 >= 0) & (dist <= -self.config.collision_depth)
+        if not deep.any():
+            return ""
+        a, b = np.maximum(g1, 0), np.maximum(g2, 0)
+        hit = deep & (
+            (self._robot_geom[a] & self._static_geom[b])
+            | (self._robot_geom[b] & self._static_geom[a])
+        )
+        if not hit.any():
+            return ""
+        i = int(np.argmax(hit))
+        return f"{m.geom(int(g1[i])).name} with {m.geom(int(g2[i])).name}"
 
     def _pos_error(self, target: Pose) -> float:
         return float(np.linalg.norm(self.ee_pose().position - target.position))
@@ -279,14 +289,7 @@ class SimPanda(ArmModelChecks, Robot):
         still = 0
         for _ in range(math.ceil(self.config.grasp_timeout / dt)):
             w.step(1)
-            v = np.abs(
-                d.qvel[
-                    [
-                        self.world.model.jnt_dofadr[self.world.model.joint(j).id]
-                        for j in self.names.finger_joints
-                    ]
-                ]
-            ).max()
+            v = np.abs(d.qvel[self._finger_dofadr]).max()
             still = still + 1 if v < 1e-3 else 0
             if still >= 20:
                 break

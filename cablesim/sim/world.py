@@ -50,6 +50,10 @@ _WARNINGS = (
 )
 
 
+_WARNING_INDEX = np.array([int(w) for w in _WARNINGS])
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
+_SOLVERS = {"Newton": int(mujoco.mjtSolver.mjSOL_NEWTON), "CG": int(mujoco.mjtSolver.mjSOL_CG)}
+
 StepHook = Callable[["World"], None]
 
 
@@ -135,8 +139,8 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     return f"""
 <mujoco model="cablesim_task_board">
   <compiler angle="radian" autolimits="true"/>
-  <option timestep="{cfg.physics.timestep}" integrator="discrete" gravity="0 0 {cfg.physics.gravity}"
-          cone="elliptic" impratio="10"/>
+  <option timestep="{cfg.physics.timestep!r}" integrator="discrete" gravity="0 0 {cfg.physics.gravity}"
+          cone="elliptic" impratio="10" solver="{cfg.physics.solver}"/>
   <size memory="64M"/>
   <visual>
     <global offwidth="{max(1280, cfg.camera.width)}" offheight="{max(720, cfg.camera.height)}"/>
@@ -220,6 +224,11 @@ class World:
         self.T_world_camera = T
         self._warn_counts = np.zeros(len(_WARNINGS), int)
         self._settled_state: np.ndarray | None = None
+        # Newton with CG standing in where Newton stalls (see PhysicsConfig and _advance)
+        self._solver = int(model.opt.solver)
+        self._fallback_steps = 0
+        self._fallbacks = 0  # how often CG stood in since the last reset
+        self._step_state = np.empty(mujoco.mj_stateSize(model, _STATE))
         self.before_step: list[StepHook] = []
         self.after_step: list[StepHook] = []
 
@@ -314,22 +323,59 @@ class World:
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps, running the step hooks around each; raise
         ``PhysicsDivergedError`` if the physics blew up."""
-        m, d = self.model, self.data
+        d = self.data
         try:
             if not (self.before_step or self.after_step):
                 for _ in range(n):
-                    mujoco.mj_step(m, d)
+                    # a blow-up resets the data and counts a warning: caught below
+                    self._advance()
                 self.check_diverged()
                 return
             for _ in range(n):
                 for hook in tuple(self.before_step):
                     hook(self)
-                mujoco.mj_step(m, d)
+                self._advance()
                 self.check_diverged()
                 for hook in tuple(self.after_step):
                     hook(self)
         except mujoco.FatalError as e:  # e.g. out of memory for contacts
             raise PhysicsDivergedError(f"MuJoCo stopped at t={d.time:.3f}s: {e}") from e
+
+    def _advance(self) -> None:
+        """One physics step.  With ``physics.solver`` Newton: if Newton stops converging (it
+        hits its iteration limit, which MuJoCo 4.0's Newton does in some hose-on-hose contact
+        states and then leaves the hoses jittering), the step is redone from the same state
+        with CG, and CG keeps stepping for ``physics.fallback_time`` before Newton resumes.
+        Both solve the same convex problem; this only picks the one that converges."""
+        m, d = self.model, self.data
+        if self._fallback_steps > 0:
+            mujoco.mj_step(m, d)
+            self._fallback_steps -= 1
+            if self._fallback_steps == 0:
+                m.opt.solver = self._solver
+            return
+        fallback = self.cfg.physics.fallback_time
+        if m.opt.solver != _SOLVERS["Newton"] or fallback <= 0:
+            mujoco.mj_step(m, d)
+            return
+        mujoco.mj_getState(m, d, self._step_state, _STATE)
+        mujoco.mj_step(m, d)
+        if d.solver_niter[: max(1, d.nisland)].max() < m.opt.iterations:
+            return
+        mujoco.mj_setState(m, d, self._step_state, _STATE)
+        m.opt.solver = _SOLVERS["CG"]
+        self._fallbacks += 1
+        self._fallback_steps = max(1, round(fallback / m.opt.timestep))
+        mujoco.mj_step(m, d)
+        self._fallback_steps -= 1
+        if self._fallback_steps == 0:
+            m.opt.solver = self._solver
+
+    @property
+    def solver_fallbacks(self) -> int:
+        """How often CG stood in for a Newton step that did not converge since the last reset
+        (see ``_advance``)."""
+        return self._fallbacks
 
     @contextmanager
     def hooks(
@@ -348,10 +394,10 @@ class World:
 
     def check_diverged(self) -> None:
         d = self.data
-        counts = np.array([d.warning[w].number for w in _WARNINGS])
+        counts = d.warning.number[_WARNING_INDEX]
         bad = counts > self._warn_counts
         self._warn_counts = counts
-        if bad.any() or not np.isfinite(d.qpos).all() or not np.isfinite(d.qvel).all():
+        if bad.any() or not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
             names = [w.name for w, b in zip(_WARNINGS, bad, strict=True) if b]
             raise PhysicsDivergedError(
                 f"physics diverged at t={d.time:.3f}s "
@@ -378,11 +424,13 @@ class World:
 
     def reset(self) -> None:
         """Back to the settled state (bit for bit)."""
+        self.model.opt.solver = self._solver
+        self._fallback_steps = self._fallbacks = 0
         if self._settled_state is None:
             self._set_start_shapes()
         else:
             self.set_state(self._settled_state)
-        self._warn_counts = np.array([self.data.warning[w].number for w in _WARNINGS])
+        self._warn_counts = self.data.warning.number[_WARNING_INDEX]
 
     # ------------------------------------------------------------------ hoses
     def hose_vertices(self, i: int) -> np.ndarray:

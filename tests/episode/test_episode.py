@@ -65,6 +65,16 @@ def test_grasped_hose_follows_each_action(episode):
     assert len(res.other_hose_displacement()) == N_HOSES - 1
 
 
+def test_timings_split_wall_and_cpu_time(episode):
+    ep, _ = episode
+    t = ep.result.timings
+    for kind in ("", "cpu_"):
+        parts = [t[f"{kind}{k}"] for k in ("physics_control", "rendering", "ground_truth")]
+        assert all(p > 0 for p in parts), t
+        assert sum(parts) == pytest.approx(t[f"{kind}total"])
+    assert "CPU time: total" in ep.result.summary()
+
+
 def test_stream_contract(episode):
     ep, _ = episode
     s: Stream = ep.result.stream

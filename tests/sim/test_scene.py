@@ -39,6 +39,9 @@ def _cfg(**kw) -> SceneConfig:
         (SceneConfig(board=BoardConfig(connectors=((2.0, 0.5),))), "board.connectors[0]"),
         (SceneConfig(camera=CameraConfig(width=1920, height=1080)), "camera.width/height"),
         (SceneConfig(physics=PhysicsConfig(timestep=0.05)), "physics.timestep"),
+        (SceneConfig(physics=PhysicsConfig(solver="PGS")), "physics.solver"),
+        (SceneConfig(camera=CameraConfig(sphere_stacks=1)), "camera.sphere_stacks"),
+        (SceneConfig(physics=PhysicsConfig(fallback_time=-1.0)), "physics.fallback_time"),
         (SceneConfig(seed=-1), "seed"),
     ],
 )
@@ -142,3 +145,49 @@ def test_diverged_physics_raises_a_named_error(settled) -> None:
         world.step(1)
     world.reset()
     world.step(1)  # usable again after reset
+
+
+def test_cg_stands_in_where_newton_does_not_converge(settled) -> None:
+    """A Newton step that hits the iteration limit is redone from the same state with CG (the
+    committed step is CG's), CG goes on for fallback_time, then Newton resumes; reset restores
+    Newton and the same pull gives the same state again."""
+    import mujoco
+
+    world = settled
+    m, d = world.model, world.data
+    newton, cg = int(mujoco.mjtSolver.mjSOL_NEWTON), int(mujoco.mjtSolver.mjSOL_CG)
+    assert m.opt.solver == newton
+    body = int(world.hoses[0].vertex_bodies[len(world.hoses[0].vertex_bodies) // 2])
+    iterations = m.opt.iterations
+
+    def pulled_state() -> np.ndarray:
+        world.reset()
+        d.xfrc_applied[body, :3] = [0.0, 0.5, 0.3]
+        world.step(3)
+        return world.get_state()
+
+    state = pulled_state()
+    m.opt.iterations = 1  # Newton cannot converge in one iteration on a pulled hose
+    try:
+        world.step(1)
+        assert world.solver_fallbacks == 1
+        assert m.opt.solver == cg  # CG goes on ...
+        after_one = world.get_state()
+        # ... and the committed step is exactly a CG step from the same state
+        world.set_state(state)
+        m.opt.solver = cg
+        mujoco.mj_step(m, d)
+        np.testing.assert_array_equal(world.get_state(), after_one)
+    finally:
+        m.opt.iterations = iterations
+    world.set_state(after_one)
+    m.opt.solver = cg
+    world.step(round(world.cfg.physics.fallback_time / m.opt.timestep) - 1)
+    assert m.opt.solver == newton  # Newton resumes after fallback_time
+    assert world.solver_fallbacks == 1
+    end = world.get_state()
+    assert not np.array_equal(end, state)
+    np.testing.assert_array_equal(pulled_state(), state)
+    world.reset()
+    assert m.opt.solver == newton and world.solver_fallbacks == 0
+    d.xfrc_applied[body, :] = 0.0

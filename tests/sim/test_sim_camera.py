@@ -205,3 +205,61 @@ def test_mesh_look_labels_what_is_drawn():
     p_robot, m_robot = p_home.labels == LABEL_ROBOT, m_home.labels == LABEL_ROBOT
     assert m_robot.sum() > 500 and not np.array_equal(p_robot, m_robot)
     assert (p_robot & m_robot).sum() / (p_robot | m_robot).sum() > 0.6
+
+
+def test_layered_rendering_gives_the_pixels_of_a_full_render():
+    """The background layer (world-welded geoms and sky, rendered once) under the moving layer
+    (hoses, robot) is the full render bit for bit: parked arm, arm in view, a pulled hose, and
+    after the camera was moved (the cached background must follow it)."""
+    import mujoco
+
+    from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses
+
+    world = World.build(
+        SceneConfig(seed=0, camera=CameraConfig(width=160, height=120), robot=RobotConfig())
+    )
+    with SimCamera(world) as layered, SimCamera(world, layered=False) as full:
+        assert layered.layered and not full.layered
+
+        def same() -> None:
+            a, b = layered.snapshot(), full.snapshot()
+            for name in ("rgb", "depth", "labels", "body"):
+                assert np.array_equal(getattr(a, name), getattr(b, name)), name
+            c, d = layered.capture(), full.capture()
+            assert np.array_equal(c.rgb, d.rgb) and np.array_equal(c.depth, d.depth)
+
+        same()
+        world.data.qpos[joint_qpos_addresses(world.model, world.panda.joints)] = HOME_QPOS
+        mujoco.mj_forward(world.model, world.data)
+        assert (layered.render_labels() == LABEL_ROBOT).sum() > 100
+        same()
+        world.data.xfrc_applied[int(world.hoses[0].vertex_bodies[8]), :3] = [0.0, 0.4, 0.1]
+        world.step(50)
+        same()
+        world.model.cam_pos[world.camera_id] += [0.0, 0.05, 0.02]
+        mujoco.mj_forward(world.model, world.data)
+        same()
+    # multisampling blends the layers at their edges: such a camera renders in one pass
+    with SimCamera(world, antialias_samples=4) as aa:
+        assert not aa.layered
+
+
+def test_coarser_sphere_caps_change_almost_no_pixel(world: World):
+    """8 stacks per sphere (the default, for speed) instead of MuJoCo's 16: the hoses' capsule
+    caps hide inside the neighbouring edges, so only a few pixels at hose ends change."""
+    import dataclasses
+
+    with SimCamera(world) as cam:
+        coarse = cam.snapshot()
+    world.cfg.camera = dataclasses.replace(world.cfg.camera, sphere_stacks=16)
+    try:
+        with SimCamera(world) as cam:
+            fine = cam.snapshot()
+    finally:
+        world.cfg.camera = dataclasses.replace(world.cfg.camera, sphere_stacks=8)
+    assert world.model.vis.quality.numstacks == 16  # the model's own setting is kept
+    labels = coarse.labels != fine.labels
+    changed = np.abs(coarse.rgb.astype(int) - fine.rgb.astype(int)).max(-1) > 0
+    print(f"{changed.sum()} pixels and {labels.sum()} labels of {changed.size} changed")
+    assert changed.any()  # the setting is in effect
+    assert changed.mean() < 1e-3 and labels.mean() < 2e-4
