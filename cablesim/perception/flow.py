@@ -155,14 +155,40 @@ class DISFlow(FlowEstimator):
         preset: str = "medium",
         gate: GateParams | None = None,
         variational_refinement_iters: int | None = None,
+        finest_scale: int | None = None,
+        patch_size: int | None = None,
+        patch_stride: int | None = None,
+        gradient_descent_iters: int | None = None,
     ) -> None:
         if preset not in DIS_PRESETS:
             raise InputError(f"unknown DIS preset {preset!r}; choose one of {sorted(DIS_PRESETS)}")
         self.preset = preset
         self.gate = gate if gate is not None else GateParams()
         self._dis = cv2.DISOpticalFlow_create(DIS_PRESETS[preset])
-        if variational_refinement_iters is not None:
-            self._dis.setVariationalRefinementIterations(int(variational_refinement_iters))
+        # optional overrides of the preset (None keeps the preset's value)
+        self.overrides: dict[str, int] = {}
+        for name, value, setter, lo in (
+            (
+                "variational_refinement_iters",
+                variational_refinement_iters,
+                "VariationalRefinementIterations",
+                0,
+            ),
+            ("finest_scale", finest_scale, "FinestScale", 0),
+            ("patch_size", patch_size, "PatchSize", 2),
+            ("patch_stride", patch_stride, "PatchStride", 1),
+            ("gradient_descent_iters", gradient_descent_iters, "GradientDescentIterations", 1),
+        ):
+            if value is None:
+                continue
+            if isinstance(value, bool) or int(value) != value or value < lo:
+                raise InputError(f"DIS {name} must be an integer >= {lo}, got {value!r}")
+            getattr(self._dis, "set" + setter)(int(value))
+            self.overrides[name] = int(value)
+        if patch_stride is not None and patch_stride > self._dis.getPatchSize():
+            raise InputError(
+                f"DIS patch_stride {patch_stride} exceeds the patch size {self._dis.getPatchSize()}"
+            )
         self._gate_cache: tuple[int, np.ndarray] | None = None
 
     def _gate(self, gray1: np.ndarray) -> np.ndarray:
@@ -183,7 +209,7 @@ class DISFlow(FlowEstimator):
         return flow
 
     def describe(self) -> dict[str, Any]:
-        return {"name": self.name, "preset": self.preset, "gate": vars(self.gate)}
+        return {"name": self.name, "preset": self.preset, **self.overrides, "gate": vars(self.gate)}
 
 
 class FarnebackFlow(FlowEstimator):
@@ -233,6 +259,77 @@ class FarnebackFlow(FlowEstimator):
 
     def describe(self) -> dict[str, Any]:
         return {"name": self.name, **self.params, "gate": vars(self.gate)}
+
+
+class RegionFlow(FlowEstimator):
+    """Flow on a region of the image, scaled up (SPEC section 8, the thesis's geometry).
+
+    Both images are cropped to ``crop`` = (x0, y0, width, height) (None: the whole image),
+    resized by ``scale`` (bicubic), the ``base`` estimator runs on the result, its flow is
+    divided by ``scale``, resized back to the crop's size and pasted into a zero full-size
+    flow: pixels outside the region have no motion.  An oracle base gives its exact flow,
+    zero outside the region.  Scaling up makes thin hoses wider than the flow's patches."""
+
+    def __init__(
+        self,
+        base: FlowEstimator,
+        crop: tuple[int, int, int, int] | None = None,
+        scale: float = 1.0,
+    ) -> None:
+        if not isinstance(base, FlowEstimator):
+            raise InputError(f"base must be a FlowEstimator, got {type(base).__name__}")
+        if not np.isfinite(scale) or not 0.25 <= float(scale) <= 8:
+            raise InputError(f"scale must be within 0.25 .. 8, got {scale!r}")
+        if crop is not None:
+            if len(crop) != 4 or any(int(c) != c for c in crop):
+                raise InputError(f"crop must be (x0, y0, width, height) integers, got {crop!r}")
+            if crop[0] < 0 or crop[1] < 0 or crop[2] < 4 or crop[3] < 4:
+                raise InputError(f"crop {crop!r} must start inside the image and be >= 4x4")
+            crop = tuple(int(c) for c in crop)  # type: ignore[assignment]
+        self.base = base
+        self.crop = crop
+        self.scale = float(scale)
+        self.name = base.name
+
+    def _region(self, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+        h, w = shape
+        if self.crop is None:
+            return 0, 0, w, h
+        x0, y0, cw, ch = self.crop
+        if x0 + cw > w or y0 + ch > h:
+            raise InputError(f"crop {self.crop} does not fit the {w}x{h} image")
+        return x0, y0, cw, ch
+
+    def compute(self, image1: np.ndarray, image2: np.ndarray) -> np.ndarray:
+        g1, g2 = as_image(image1, "image1"), as_image(image2, "image2")
+        if g1.shape != g2.shape:
+            raise InputError(f"image sizes differ: {g1.shape} vs {g2.shape}")
+        h, w = g1.shape[:2]
+        x0, y0, cw, ch = self._region((h, w))
+        a = np.ascontiguousarray(g1[y0 : y0 + ch, x0 : x0 + cw])
+        b = np.ascontiguousarray(g2[y0 : y0 + ch, x0 : x0 + cw])
+        if self.scale != 1.0:
+            size = (max(4, round(cw * self.scale)), max(4, round(ch * self.scale)))
+            a = cv2.resize(a, size, interpolation=cv2.INTER_CUBIC)
+            b = cv2.resize(b, size, interpolation=cv2.INTER_CUBIC)
+        f = self.base.compute(a, b)
+        if self.scale != 1.0:
+            f = cv2.resize(f, (cw, ch), interpolation=cv2.INTER_LINEAR) * np.float32(1 / self.scale)
+        out = np.zeros((h, w, 2), np.float32)
+        out[y0 : y0 + ch, x0 : x0 + cw] = f
+        return out
+
+    def frame_flow(self, frame: Frame, target: Frame) -> np.ndarray:
+        if isinstance(self.base, OracleFlow):
+            flow = self.base.frame_flow(frame, target)
+            x0, y0, cw, ch = self._region(target.shape)
+            out = np.zeros_like(flow)
+            out[y0 : y0 + ch, x0 : x0 + cw] = flow[y0 : y0 + ch, x0 : x0 + cw]
+            return out
+        return super().frame_flow(frame, target)
+
+    def describe(self) -> dict[str, Any]:
+        return {**self.base.describe(), "crop": self.crop, "scale": self.scale}
 
 
 def make_flow(name: str | FlowEstimator = "dis", **kwargs: Any) -> FlowEstimator:

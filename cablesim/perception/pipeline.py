@@ -36,6 +36,7 @@ from cablesim.perception.correlation import (
 )
 from cablesim.perception.flow import FlowEstimator, make_flow
 from cablesim.perception.frames import Frame, Stream
+from cablesim.perception.refine import DEFAULT_REFINE, RefineParams, SampleFilter, support_mask
 from cablesim.perception.segmentation import (
     SegmentationAccumulator,
     SegmentationParams,
@@ -69,6 +70,9 @@ class StreamStatistics:
     segmentation: dict[int, SegmentationResult] = field(default_factory=dict)
     directions: dict[int, np.ndarray] = field(default_factory=dict)
     flow: dict[str, Any] = field(default_factory=dict)
+    # target pixels allowed to vote (``cablesim.perception.refine.support_mask``); None: all
+    support: np.ndarray | None = None
+    refine: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -101,17 +105,22 @@ def plan_jobs(stream: Stream, delta_g: float = 0.001) -> list[Job]:
 
 
 def _flows_sequential(
-    jobs: Sequence[Job], flow: FlowEstimator, target: Frame
+    jobs: Sequence[Job], flow: FlowEstimator, target: Frame, check: SampleFilter | None = None
 ) -> Iterator[tuple[Job, np.ndarray]]:
     for job in jobs:
-        yield job, flow.frame_flow(job.frame, target)
+        phi = flow.frame_flow(job.frame, target)
+        yield job, (phi if check is None else check.apply(phi, job.frame))
 
 
 _DONE = object()
 
 
 def _flows_pipelined(
-    jobs: Sequence[Job], flow: FlowEstimator, target: Frame, queue_size: int = 4
+    jobs: Sequence[Job],
+    flow: FlowEstimator,
+    target: Frame,
+    queue_size: int = 4,
+    check: SampleFilter | None = None,
 ) -> Iterator[tuple[Job, np.ndarray]]:
     """Stage 1 in a worker thread; yields (job, flow) in job order."""
     q: queue.Queue = queue.Queue(maxsize=max(1, int(queue_size)))
@@ -131,7 +140,10 @@ def _flows_pipelined(
             for job in jobs:
                 if stop.is_set():
                     return
-                if not put((job, flow.frame_flow(job.frame, target))):
+                phi = flow.frame_flow(job.frame, target)
+                if check is not None:
+                    phi = check.apply(phi, job.frame)
+                if not put((job, phi)):
                     return
             put(_DONE)
         except BaseException as exc:  # noqa: BLE001 - re-raised in the consumer
@@ -158,14 +170,19 @@ def iter_flows(
     delta_g: float = 0.001,
     pipelined: bool = True,
     queue_size: int = 4,
+    refine: RefineParams | None = None,
 ) -> Iterator[tuple[Job, np.ndarray]]:
-    """(job, flow to target) for every kept frame, in stream order."""
+    """(job, flow to target) for every kept frame, in stream order; with ``refine`` the
+    per-sample checks (arm masks, photometric, forward-backward) set rejected pixels to NaN."""
     est = make_flow(flow)
     jobs = plan_jobs(stream, delta_g)
     target = stream.target
+    check = None
+    if refine is not None and refine.per_sample:
+        check = SampleFilter(refine, target, est)
     if pipelined:
-        return _flows_pipelined(jobs, est, target, queue_size)
-    return _flows_sequential(jobs, est, target)
+        return _flows_pipelined(jobs, est, target, queue_size, check)
+    return _flows_sequential(jobs, est, target, check)
 
 
 def compute_statistics(
@@ -178,8 +195,13 @@ def compute_statistics(
     pipelined: bool = True,
     queue_size: int = 4,
     dtype: type = np.float32,
+    refine: RefineParams | None = None,
 ) -> StreamStatistics:
-    """One pass over the stream feeding the accumulators the ``methods`` need."""
+    """One pass over the stream feeding the accumulators the ``methods`` need.
+
+    ``refine`` (default :data:`~cablesim.perception.refine.DEFAULT_REFINE`) selects the bleed
+    remedies of :mod:`cablesim.perception.refine`: per-sample checks on every flow, and the
+    target pixels allowed to vote (``StreamStatistics.support``)."""
     if isinstance(stream, Sequence) and not isinstance(stream, Stream):
         stream = Stream(list(stream))
     if not isinstance(stream, Stream):
@@ -204,7 +226,10 @@ def compute_statistics(
     corr: dict[int, CorrelationAccumulator] = {}
     seg: dict[int, SegmentationAccumulator] = {}
     counts: dict[int, int] = {}
-    for job, phi in iter_flows(stream, est, delta_g, pipelined, queue_size):
+    rp = DEFAULT_REFINE if refine is None else refine
+    if not isinstance(rp, RefineParams):
+        raise InputError(f"refine must be a RefineParams, got {type(rp).__name__}")
+    for job, phi in iter_flows(stream, est, delta_g, pipelined, queue_size, rp):
         a = job.action
         if want_corr:
             if a not in corr:
@@ -224,6 +249,8 @@ def compute_statistics(
         segmentation={a: acc.result() for a, acc in seg.items()},
         directions={a: action_direction(stream.action_frames(a)) for a in actions},
         flow=est.describe(),
+        support=support_mask(target, rp),
+        refine=rp.describe(),
     )
 
 
@@ -232,7 +259,18 @@ def masks_from_statistics(
     method: str,
     params: CorrelationParams | SegmentationParams | AblationParams | None = None,
 ) -> dict[int, np.ndarray]:
-    """Per-action masks of ``method`` from cached statistics."""
+    """Per-action masks of ``method`` from cached statistics (only where ``stats.support``)."""
+    masks = _raw_masks(stats, method, params)
+    if stats.support is not None:
+        masks = {a: m & stats.support for a, m in masks.items()}
+    return masks
+
+
+def _raw_masks(
+    stats: StreamStatistics,
+    method: str,
+    params: CorrelationParams | SegmentationParams | AblationParams | None = None,
+) -> dict[int, np.ndarray]:
     if method == "correlation":
         p = params if params is not None else CorrelationParams()
         if not isinstance(p, CorrelationParams):
@@ -279,10 +317,12 @@ def segment_stream(
     delta_g: float = 0.001,
     pipelined: bool = True,
     queue_size: int = 4,
+    refine: RefineParams | None = None,
 ) -> StreamSegmentation:
     """Segment the grasped hose in the target frame of ``stream`` with one method.
 
     Returns per-action masks, their vote image, and (correlation/ablation) the c0 and R^2 maps.
+    ``refine``: the bleed remedies (:func:`compute_statistics`).
     """
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose from {METHODS}")
@@ -302,6 +342,7 @@ def segment_stream(
         delta_g=delta_g,
         pipelined=pipelined,
         queue_size=queue_size,
+        refine=refine,
         **kw,
     )
     return segment_from_statistics(stats, method, params)
