@@ -7,6 +7,12 @@ the running accumulators.  With ``pipelined=True`` the flow runs in a worker thr
 while the accumulators consume the results in order (stage 2) through a bounded queue; errors
 in either stage propagate and the results are identical to the sequential path.
 
+Every flow passes the per-sample checks of ``refine`` (:mod:`cablesim.perception.refine`:
+arm masks, optionally a photometric or forward-backward check; a rejected pixel gets no sample
+in that frame) and only the target pixels of ``StreamStatistics.support`` (the arm's absence,
+optionally the depth foreground) may vote: the remedies against motion bleeding across hose
+boundaries.  ``refine=None`` means :data:`~cablesim.perception.refine.DEFAULT_REFINE`.
+
 :func:`segment_stream` turns the statistics into per-action masks and a vote image for one
 method (``"correlation"``, ``"segmentation"`` or ``"ablation"``);
 :func:`masks_from_statistics` re-thresholds cached statistics cheaply (tuning).
