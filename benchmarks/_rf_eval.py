@@ -186,6 +186,10 @@ SUPPORTS: dict[str, RefineParams | None] = {
     "fg-h8": RefineParams(foreground=ForegroundParams(min_height=0.008)),
     "fg-c2": RefineParams(foreground=ForegroundParams(colour_px=2)),
     "fg-c3": RefineParams(foreground=ForegroundParams(colour_px=3)),
+    "fg-c4": RefineParams(foreground=ForegroundParams(colour_px=4)),
+    "fg-c3-w5": RefineParams(foreground=ForegroundParams(colour_px=3, window_m=0.05)),
+    "fg-c3-w7": RefineParams(foreground=ForegroundParams(colour_px=3, window_m=0.07)),
+    "fg-c3-h3": RefineParams(foreground=ForegroundParams(colour_px=3, min_height=0.003)),
     "contrast": RefineParams(contrast=ContrastParams()),
     "fg&contrast": RefineParams(foreground=ForegroundParams(), contrast=ContrastParams()),
 }
@@ -263,6 +267,8 @@ def compute_variants(
 
 
 def _stats_path(scene: Scene, noisy: bool, flow: str, sample: str) -> Path:
+    if flow == "oracle" and SAMPLES[sample].photometric is None:
+        noisy = False  # ground-truth flow and arm masks do not see the sensor noise
     return STATS / scene.name / ("noisy" if noisy else "clean") / flow / f"{sample}.npz"
 
 

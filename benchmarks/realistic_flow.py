@@ -55,14 +55,25 @@ EXPLORE_PLAN: dict[str, list[str]] = {
     "dis-medium": ["raw", "arm", "arm+photo30"],
     "dis-fine": ["arm", "arm+photo30"],
     "dis-fast": ["arm"],
-    "dis-medium-board1.5": ["arm"],
 }
 # measured on the first validation scenes only (each costs a flow or more per frame)
 EXPLORE_PLAN_SMALL: dict[str, list[str]] = {
     "dis-medium": ["arm+photo20", "arm+photo45", "arm+fb1"],
+    "dis-medium-board1.5": ["arm"],
 }
 EXPLORE_SMALL_SCENES = 4
-EXPLORE_SUPPORTS = ["none", "fg", "fg-d1", "fg-c2", "fg-c3", "contrast", "fg&contrast"]
+EXPLORE_SUPPORTS = [
+    "none",
+    "fg",
+    "fg-d1",
+    "fg-c2",
+    "fg-c3",
+    "fg-c4",
+    "fg-c3-w5",
+    "fg-c3-h3",
+    "contrast",
+    "fg&contrast",
+]
 
 # (flow, per-sample variant, target-frame support)
 BEFORE = ("dis-medium", "raw", "none")  # what perception did before this work
@@ -96,7 +107,10 @@ def explore(val: list[Scene], log) -> list[dict[str, Any]]:
     ensure_stats(small, True, EXPLORE_PLAN_SMALL, log)
     rows = explore_rows(val, EXPLORE_PLAN, EXPLORE_SUPPORTS, log)
     # the costly per-sample checks against their reference on the same few scenes
-    ref = {"dis-medium": ["arm", "arm+photo30", *EXPLORE_PLAN_SMALL["dis-medium"]]}
+    ref = {
+        "dis-medium": ["arm", "arm+photo30", *EXPLORE_PLAN_SMALL["dis-medium"]],
+        "dis-medium-board1.5": ["arm"],
+    }
     for r in explore_rows(small, ref, ["none", "fg-c3"], log):
         r["subset"] = len(small)
         rows.append(r)

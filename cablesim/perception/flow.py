@@ -31,7 +31,13 @@ DIS_PRESETS = {
     "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
     "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
     "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
+    "fine": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,  # with the overrides of DIS_FINE
 }
+#: ``fine``: OpenCV's medium preset with 8 px patches every 4 px at half resolution (medium's
+#: are 12 px every 8 px): patches of 16 full-resolution pixels instead of 24, so a 6-7 px
+#: hose drags its motion less far onto the board beside it, at about medium's cost
+#: (``benchmarks/realistic_flow.py``).
+DIS_FINE = {"finest_scale": 1, "patch_size": 8, "patch_stride": 4}
 
 
 def to_gray(img: np.ndarray, name: str = "image") -> np.ndarray:
@@ -142,7 +148,9 @@ class GateParams:
 class DISFlow(FlowEstimator):
     """OpenCV DIS optical flow (CPU default) with a low-texture gate.
 
-    ``preset`` is one of ``ultrafast``, ``fast``, ``medium``.  Without the gate DIS reports
+    ``preset`` is one of ``ultrafast``, ``fast``, ``medium``, ``fine`` (:data:`DIS_FINE`);
+    ``finest_scale``, ``patch_size``, ``patch_stride``, ``gradient_descent_iters`` and
+    ``variational_refinement_iters`` override the preset's.  Without the gate DIS reports
     motion on most of a plain background (SPEC section 9: ~70%; with it ~3%); the gate zeroes
     the flow wherever the *first* image (the target frame, whose pixels the flow is in) has
     too little local gradient.
@@ -167,6 +175,10 @@ class DISFlow(FlowEstimator):
         self._dis = cv2.DISOpticalFlow_create(DIS_PRESETS[preset])
         # optional overrides of the preset (None keeps the preset's value)
         self.overrides: dict[str, int] = {}
+        if preset == "fine":
+            finest_scale = DIS_FINE["finest_scale"] if finest_scale is None else finest_scale
+            patch_size = DIS_FINE["patch_size"] if patch_size is None else patch_size
+            patch_stride = DIS_FINE["patch_stride"] if patch_stride is None else patch_stride
         for name, value, setter, lo in (
             (
                 "variational_refinement_iters",

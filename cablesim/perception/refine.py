@@ -24,8 +24,11 @@ Per pixel of the target frame, once per interaction (``support``: pixels allowed
 - **foreground** (``foreground``, :class:`ForegroundParams`): the hose stands in front of the
   board.  Median-filtered target depth; a RANSAC fit of the board plane (``1/z`` is linear in
   the pixel coordinates for a plane); height above the plane, clipped to +-``max_height``; a
-  pixel is foreground where its height exceeds the lowest height within a window
-  (``window_m``) by ``min_height`` (and stays below ``max_height``).
+  pixel is foreground where its height exceeds the local background -- the grey opening of
+  the height over a window of ``window_m``, which follows planes and slopes but not what is
+  narrower than the window -- by ``min_height`` (and stays below ``max_height``); its edges
+  can then be moved to the image's colour edges (``colour_px``: stereo depth fattens or
+  erodes a thin object by a few pixels, the image does not).
 - **contrast** (``contrast``, :class:`ContrastParams`): a hose pixel differs in colour from
   the board around it: max-channel distance to the median colour of a window several hose
   widths wide.
@@ -313,7 +316,11 @@ def foreground_mask(
     height = np.clip(height, -params.max_height, params.max_height)
     zmed = float(np.median(z[valid]))
     win = max(3, int(round(params.window_m * intrinsics.f / zmed)) | 1)
-    ground = cv2.erode(height, cv2.getStructuringElement(cv2.MORPH_RECT, (win, win)))
+    # the local background: a grey opening (erosion then dilation) follows planes and slopes
+    # (the table seen at a grazing angle) but not what is narrower than the window (a hose)
+    ground = cv2.morphologyEx(
+        height, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_RECT, (win, win))
+    )
     fg = ((height - ground) > params.min_height) & (height < params.max_height) & valid
     if params.colour_px > 0:
         if rgb is None:
