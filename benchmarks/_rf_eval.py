@@ -557,6 +557,17 @@ def score_row(preds: Sequence[np.ndarray], truths: Sequence[np.ndarray], beta: f
     """Mean over sequences (SPEC 7): precision over non-empty predictions (nanmean), recall,
     F_beta (0 for an empty prediction) and IoU over all."""
     P, R, F, J = [], [], [], []
+    if not preds:
+        nan = float("nan")
+        return {
+            "precision": nan,
+            "recall": nan,
+            "f": nan,
+            "iou": nan,
+            "empty": 0,
+            "n": 0,
+            "per_scene": [],
+        }
     for m, t in zip(preds, truths, strict=True):
         tp = float((m & t).sum())
         fp = float(m.sum()) - tp
@@ -597,39 +608,43 @@ def fp_near_hose(preds: Sequence[np.ndarray], targets: Sequence[Target], px: flo
 
 
 # --------------------------------------------------------------------------------- proposals
-def grade_proposals(scene: Scene, votes: np.ndarray, tg: Target) -> dict[str, Any]:
-    """The grasp sampler's next proposal from ``votes`` (one grasp done), as the exploration
-    loop makes it: the robot's reachability callback, the first grasp recorded as a previous
-    (blacklisted) grasp, the front-most part of the proposal kept; graded against the target
-    labels (SPEC 7), with every candidate the robot could not reach graded unreachable."""
+def grade_proposals(scene: Scene, votes: dict[str, np.ndarray], tg: Target) -> dict[str, Any]:
+    """The grasp sampler's next proposal from each vote image of ``votes`` (one grasp done),
+    as the exploration loop makes it: the robot's reachability callback, the first grasp
+    recorded as a previous (blacklisted) grasp, the front-most part of the proposal kept;
+    graded against the target labels (SPEC 7), with every candidate the robot could not
+    reach graded too (unreachable).  One simulated session (for the robot) per scene."""
     from cablesim.perception.grasp_sampler import GraspSampler
     from cablesim.perception.metrics import grade_proposal
     from cablesim.policies.explore import front_segment, grasp_reachability
     from cablesim.sim.session import SimSession
 
     meta = json.loads((scene.path / "meta.json").read_text())["meta"]
+    T = np.asarray(meta["T_world_camera"], float)
+    seg = np.zeros(tg.truth.shape, bool)
+    px = np.asarray(meta["segment_px"], int)
+    seg[px[:, 1], px[:, 0]] = True
+    centre = meta["result"].get("centre")
+    c_cam = None if centre is None else ((np.asarray(centre)[None] - T[:3, 3]) @ T[:3, :3])[0]
     session = SimSession.build(scene.config())
+    out: dict[str, Any] = {}
     try:
-        T = np.asarray(meta["T_world_camera"], float)
         reach = grasp_reachability(session.robot, T, session.cfg.interaction)
-        sampler = GraspSampler(reachability=reach)
-        seg = np.zeros(tg.truth.shape, bool)
-        px = np.asarray(meta["segment_px"], int)
-        seg[px[:, 1], px[:, 0]] = True
-        centre = meta["result"].get("centre")
-        if centre is not None:
-            c_cam = ((np.asarray(centre)[None] - T[:3, 3]) @ T[:3, :3])[0]
-            sampler.add_grasp(c_cam, seg, blacklist=True)
-        sr = sampler.propose(votes.astype(np.int32), tg.depth, tg.K)
+        for name, v in votes.items():
+            sampler = GraspSampler(reachability=reach)
+            if c_cam is not None:
+                sampler.add_grasp(c_cam, seg, blacklist=True)
+            sr = sampler.propose(v.astype(np.int32), tg.depth, tg.K)
+            grades: list[str] = []
+            for c in sr.candidates:
+                if (c.rejected or "").startswith("unreachable") and c.mask.any():
+                    grades.append(grade_proposal(c.mask, tg.labels, tg.hose, False))
+            first = None
+            if sr.proposal is not None:
+                chosen = front_segment(sr.proposal.mask, tg.depth)
+                first = grade_proposal(chosen, tg.labels, tg.hose, True)
+                grades.append(first)
+            out[name] = {"proposal": first, "grades": grades, "rejections": sr.rejections()}
     finally:
         session.close()
-    grades: list[str] = []
-    for c in sr.candidates:
-        if (c.rejected or "").startswith("unreachable") and c.mask.any():
-            grades.append(grade_proposal(c.mask, tg.labels, tg.hose, False))
-    first = None
-    if sr.proposal is not None:
-        chosen = front_segment(sr.proposal.mask, tg.depth)
-        first = grade_proposal(chosen, tg.labels, tg.hose, True)
-        grades.append(first)
-    return {"proposal": first, "grades": grades, "rejections": sr.rejections()}
+    return out

@@ -148,6 +148,9 @@ class GateParams:
 class DISFlow(FlowEstimator):
     """OpenCV DIS optical flow (CPU default) with a low-texture gate.
 
+    The default preset is ``fine`` (before issue 10 it was ``medium``): on the realistic-flow
+    validation scenes it bleeds less onto the board beside a hose at about the same cost.
+
     ``preset`` is one of ``ultrafast``, ``fast``, ``medium``, ``fine`` (:data:`DIS_FINE`);
     ``finest_scale``, ``patch_size``, ``patch_stride``, ``gradient_descent_iters`` and
     ``variational_refinement_iters`` override the preset's.  Without the gate DIS reports
@@ -160,7 +163,7 @@ class DISFlow(FlowEstimator):
 
     def __init__(
         self,
-        preset: str = "medium",
+        preset: str = "fine",
         gate: GateParams | None = None,
         variational_refinement_iters: int | None = None,
         finest_scale: int | None = None,

@@ -56,6 +56,10 @@ class ForegroundParams:
     dilate_px: int = 0  # grow the foreground by this many pixels
     max_height: float = 0.3  # m: farther in front of the board is not a hose on it
     min_valid: float = 0.2  # fraction of pixels with depth below which the cue abstains
+    # fraction of the valid pixels that must stand out for the cue to speak: a depth image in
+    # which nothing stands in front of the board (a flat or synthetic scene, hoses the depth
+    # cannot resolve) says nothing about the hoses, so the cue abstains there
+    min_foreground: float = 0.002
     plane_stride: int = 4  # fit the plane on every n-th pixel
     plane_iterations: int = 5
     # image-guided edges: within this many pixels of the depth foreground's boundary a pixel
@@ -119,8 +123,11 @@ class RefineParams:
 
 #: no remedy at all (the flow as the back end gives it)
 RAW = RefineParams(arm_masks=False)
-#: what perception uses unless told otherwise
-DEFAULT_REFINE = RefineParams()
+#: what perception uses unless told otherwise (chosen on the validation scenes of
+#: ``benchmarks/realistic_flow.py``): arm masks where the frames have them, and the depth
+#: foreground with its edges moved to the image's colour edges within 3 px; it abstains where
+#: the target has no usable depth
+DEFAULT_REFINE = RefineParams(foreground=ForegroundParams(colour_px=3))
 
 
 # ------------------------------------------------------------------------------ per sample
@@ -296,8 +303,9 @@ def foreground_mask(
     rgb: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """HxW bool: pixels standing at least ``min_height`` in front of the local background;
-    None when the depth cannot tell (no depth, less than ``min_valid`` of it valid, no plane):
-    the cue then abstains rather than silencing every pixel."""
+    None when the depth cannot tell (no depth, less than ``min_valid`` of it valid, no plane,
+    less than ``min_foreground`` of it standing out): the cue then abstains rather than
+    silencing every pixel."""
     if depth is None:
         return None
     raw_valid = np.isfinite(depth) & (depth > 0)
@@ -322,6 +330,8 @@ def foreground_mask(
         height, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_RECT, (win, win))
     )
     fg = ((height - ground) > params.min_height) & (height < params.max_height) & valid
+    if fg.sum() < params.min_foreground * max(int(raw_valid.sum()), 1):
+        return None
     if params.colour_px > 0:
         if rgb is None:
             raise InputError("foreground.colour_px needs the target's colour image")

@@ -159,7 +159,8 @@ def test_foreground_mask_on_a_tilted_plane():
     assert fg[bar].mean() > 0.95 and fg[~bar].mean() < 0.01
     plane = fit_plane_inverse_depth(z)
     assert np.nanmax(np.abs(plane - _bar_depth(fatten=-BAR_W))[:, :60]) < 1e-4
-    # the cue abstains when the depth cannot tell (a recording without depth)
+    # the cue abstains when the depth cannot tell: nothing stands out, or no depth at all
+    assert foreground_mask(_bar_depth(fatten=-BAR_W), K, ForegroundParams()) is None
     assert foreground_mask(np.zeros((H, W), np.float32), K, ForegroundParams()) is None
     assert foreground_mask(None, K, ForegroundParams()) is None
     with pytest.raises(InputError, match="colour"):
