@@ -203,15 +203,12 @@ def bench_refine(n_frames: int, repeats: int) -> dict[str, float]:
         "before: DIS medium, raw flow": (DISFlow("medium"), RAW),
         "DIS medium + arm masks": (DISFlow("medium"), RefineParams()),
         "DIS medium + arm masks + photometric": (DISFlow("medium"), RefineParams(photometric=30.0)),
-        "DIS fine (scale 1, patch 8) + arm masks": (
+        "DIS fine + arm masks": (
             DISFlow("medium", finest_scale=1, patch_size=8, patch_stride=4),
             RefineParams(),
         ),
         "DIS fast + arm masks": (DISFlow("fast"), RefineParams()),
-        "default (cablesim.perception.refine.DEFAULT_REFINE), DIS medium": (
-            DISFlow("medium"),
-            DEFAULT_REFINE,
-        ),
+        "after: the defaults, DISFlow() (fine) + DEFAULT_REFINE": (DISFlow(), DEFAULT_REFINE),
     }
     res = {}
     for name, (est, rp) in configs.items():

@@ -60,6 +60,9 @@ class ForegroundParams:
     # which nothing stands in front of the board (a flat or synthetic scene, hoses the depth
     # cannot resolve) says nothing about the hoses, so the cue abstains there
     min_foreground: float = 0.002
+    # the window must span this many pixels: in a coarser image (a 15 mm hose narrower than
+    # about 3 px) the cue cannot separate a hose from its background, and abstains
+    min_window_px: int = 7
     plane_stride: int = 4  # fit the plane on every n-th pixel
     plane_iterations: int = 5
     # image-guided edges: within this many pixels of the depth foreground's boundary a pixel
@@ -146,10 +149,12 @@ class SampleFilter:
     flow: object = None  # the FlowEstimator (forward-backward needs it)
     _cache: dict = field(default_factory=dict)
 
-    def _xy(self) -> tuple[np.ndarray, np.ndarray]:
-        if "xy" not in self._cache:
-            self._cache["xy"] = _grid(*self.target.shape)
-        return self._cache["xy"]
+    def _grid(self) -> np.ndarray:
+        """HxWx2 float32 pixel coordinates (x, y) of the target."""
+        if "grid" not in self._cache:
+            xs, ys = _grid(*self.target.shape)
+            self._cache["grid"] = np.dstack([xs, ys])
+        return self._cache["grid"]
 
     def _blurred(self, rgb: np.ndarray) -> np.ndarray:
         s = self.params.photometric_blur
@@ -164,21 +169,23 @@ class SampleFilter:
             return phi
         phi = as_flow(phi, self.target.shape, "flow")
         bad = np.zeros(phi.shape[:2], bool)
-        xs, ys = self._xy()
-        fx, fy = cv2.split(phi)
-        if not cv2.checkRange(phi, quiet=True)[0]:
-            fx, fy = np.nan_to_num(fx), np.nan_to_num(fy)
-        mx, my = cv2.add(xs, fx), cv2.add(ys, fy)
+        finite = phi if np.isfinite(phi.sum()) else np.nan_to_num(phi)
+        mxy = cv2.add(self._grid(), finite)  # where each target pixel lands in frame k
         if arm:
             a8 = frame.arm_mask.view(np.uint8)
-            at_q = cv2.remap(a8, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE)
-            bad |= frame.arm_mask | (at_q > 0)
+            at_q = cv2.remap(a8, mxy, None, cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE)
+            bad |= frame.arm_mask
+            bad |= at_q.view(bool)
         if p.photometric is not None:
             if "target_blur" not in self._cache:
                 self._cache["target_blur"] = self._blurred(self.target.rgb)
             tb = self._cache["target_blur"]
             warped = cv2.remap(
-                self._blurred(frame.rgb), mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+                self._blurred(frame.rgb),
+                mxy,
+                None,
+                cv2.INTER_LINEAR,
+                borderMode=cv2.BORDER_REPLICATE,
             )
             diff = cv2.absdiff(warped, tb)
             if diff.ndim == 3:
@@ -188,8 +195,8 @@ class SampleFilter:
             if self.flow is None:
                 raise InputError("forward_backward needs the flow estimator")
             psi = self.flow.compute(frame.rgb, self.target.rgb)  # frame(q) ~ target(q + psi)
-            back = cv2.remap(psi, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            err = np.linalg.norm(np.nan_to_num(phi) + back, axis=2)
+            back = cv2.remap(psi, mxy, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            err = np.linalg.norm(finite + back, axis=2)
             bad |= err > p.forward_backward
         if not bad.any():
             return phi
@@ -303,9 +310,9 @@ def foreground_mask(
     rgb: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """HxW bool: pixels standing at least ``min_height`` in front of the local background;
-    None when the depth cannot tell (no depth, less than ``min_valid`` of it valid, no plane,
-    less than ``min_foreground`` of it standing out): the cue then abstains rather than
-    silencing every pixel."""
+    None when the depth cannot tell (no depth, less than ``min_valid`` of it valid, an image
+    too coarse for the window, no plane, less than ``min_foreground`` of it standing out):
+    the cue then abstains rather than silencing every pixel."""
     if depth is None:
         return None
     raw_valid = np.isfinite(depth) & (depth > 0)
@@ -315,6 +322,10 @@ def foreground_mask(
     if params.median_px > 1:
         z = cv2.medianBlur(z, params.median_px)
     valid = z > 0
+    zmed = float(np.median(z[valid]))
+    win = int(round(params.window_m * intrinsics.f / zmed)) | 1
+    if win < params.min_window_px:
+        return None
     plane = fit_plane_inverse_depth(z, params.plane_stride, params.plane_iterations, 0.004)
     if plane is None:
         return None
@@ -322,8 +333,6 @@ def foreground_mask(
     height = np.where(valid & np.isfinite(base), base - z, 0.0).astype(np.float32)
     # the board and what hangs on it: not what lies far behind or far in front of the plane
     height = np.clip(height, -params.max_height, params.max_height)
-    zmed = float(np.median(z[valid]))
-    win = max(3, int(round(params.window_m * intrinsics.f / zmed)) | 1)
     # the local background: a grey opening (erosion then dilation) follows planes and slopes
     # (the table seen at a grazing angle) but not what is narrower than the window (a hose)
     ground = cv2.morphologyEx(

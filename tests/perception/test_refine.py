@@ -163,6 +163,8 @@ def test_foreground_mask_on_a_tilted_plane():
     assert foreground_mask(_bar_depth(fatten=-BAR_W), K, ForegroundParams()) is None
     assert foreground_mask(np.zeros((H, W), np.float32), K, ForegroundParams()) is None
     assert foreground_mask(None, K, ForegroundParams()) is None
+    coarse = Intrinsics(100.0, 100.0, (W - 1) / 2, (H - 1) / 2, W, H)  # a hose ~1.5 px wide
+    assert foreground_mask(z, coarse, ForegroundParams()) is None
     with pytest.raises(InputError, match="colour"):
         foreground_mask(z, K, ForegroundParams(colour_px=2))
 
