@@ -11,7 +11,8 @@ Conventions
 - ``action``: 0, 1, ... for action frames, ``TARGET_ACTION`` (-1) for the target frame;
 - ``labels`` (truth): int16, hose index >= 0, ``LABEL_ROBOT`` (-2), ``LABEL_BACKGROUND`` (-1);
 - ``arm_mask`` (optional, not truth): HxW bool, the arm model rendered at the frame's joint
-  state through the calibrated camera; perception may use it (it does not by default).
+  state through the calibrated camera; perception never lets those pixels vote
+  (``cablesim.perception.refine``, ``RefineParams.arm_masks``, on by default).
 """
 
 from __future__ import annotations

@@ -7,6 +7,12 @@ the running accumulators.  With ``pipelined=True`` the flow runs in a worker thr
 while the accumulators consume the results in order (stage 2) through a bounded queue; errors
 in either stage propagate and the results are identical to the sequential path.
 
+Every flow passes the per-sample checks of ``refine`` (:mod:`cablesim.perception.refine`:
+arm masks, optionally a photometric or forward-backward check; a rejected pixel gets no sample
+in that frame) and only the target pixels of ``StreamStatistics.support`` (the arm's absence,
+optionally the depth foreground) may vote: the remedies against motion bleeding across hose
+boundaries.  ``refine=None`` means :data:`~cablesim.perception.refine.DEFAULT_REFINE`.
+
 :func:`segment_stream` turns the statistics into per-action masks and a vote image for one
 method (``"correlation"``, ``"segmentation"`` or ``"ablation"``, or the published code's
 ``"published"``, ``"published-segmentation"`` and ``"published-ablation"`` of
@@ -55,6 +61,7 @@ from cablesim.perception.published import (
     plan_published,
 )
 from cablesim.perception.published import describe as describe_published
+from cablesim.perception.refine import DEFAULT_REFINE, RefineParams, SampleFilter, support_mask
 from cablesim.perception.segmentation import (
     SegmentationAccumulator,
     SegmentationParams,
@@ -99,6 +106,12 @@ class StreamStatistics:
     published: dict[int, PublishedResult] = field(default_factory=dict)
     published_segmentation: dict[int, PublishedSegmentationResult] = field(default_factory=dict)
     published_meta: dict[str, Any] = field(default_factory=dict)
+    # target pixels allowed to vote (``cablesim.perception.refine.support_mask``); None: all
+    support: np.ndarray | None = None
+    # the same for the published methods: only when a refine was asked for explicitly (by
+    # default they stay the published code's)
+    published_support: np.ndarray | None = None
+    refine: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -131,17 +144,22 @@ def plan_jobs(stream: Stream, delta_g: float = 0.001) -> list[Job]:
 
 
 def _flows_sequential(
-    jobs: Sequence[Job], flow: FlowEstimator, target: Frame
+    jobs: Sequence[Job], flow: FlowEstimator, target: Frame, check: SampleFilter | None = None
 ) -> Iterator[tuple[Job, np.ndarray]]:
     for job in jobs:
-        yield job, flow.frame_flow(job.frame, target)
+        phi = flow.frame_flow(job.frame, target)
+        yield job, (phi if check is None else check.apply(phi, job.frame))
 
 
 _DONE = object()
 
 
 def _flows_pipelined(
-    jobs: Sequence[Job], flow: FlowEstimator, target: Frame, queue_size: int = 4
+    jobs: Sequence[Job],
+    flow: FlowEstimator,
+    target: Frame,
+    queue_size: int = 4,
+    check: SampleFilter | None = None,
 ) -> Iterator[tuple[Job, np.ndarray]]:
     """Stage 1 in a worker thread; yields (job, flow) in job order."""
     q: queue.Queue = queue.Queue(maxsize=max(1, int(queue_size)))
@@ -161,7 +179,10 @@ def _flows_pipelined(
             for job in jobs:
                 if stop.is_set():
                     return
-                if not put((job, flow.frame_flow(job.frame, target))):
+                phi = flow.frame_flow(job.frame, target)
+                if check is not None:
+                    phi = check.apply(phi, job.frame)
+                if not put((job, phi)):
                     return
             put(_DONE)
         except BaseException as exc:  # noqa: BLE001 - re-raised in the consumer
@@ -188,14 +209,19 @@ def iter_flows(
     delta_g: float = 0.001,
     pipelined: bool = True,
     queue_size: int = 4,
+    refine: RefineParams | None = None,
 ) -> Iterator[tuple[Job, np.ndarray]]:
-    """(job, flow to target) for every kept frame, in stream order."""
+    """(job, flow to target) for every kept frame, in stream order; with ``refine`` the
+    per-sample checks (arm masks, photometric, forward-backward) set rejected pixels to NaN."""
     est = make_flow(flow)
     jobs = plan_jobs(stream, delta_g)
     target = stream.target
+    check = None
+    if refine is not None and refine.per_sample:
+        check = SampleFilter(refine, target, est)
     if pipelined:
-        return _flows_pipelined(jobs, est, target, queue_size)
-    return _flows_sequential(jobs, est, target)
+        return _flows_pipelined(jobs, est, target, queue_size, check)
+    return _flows_sequential(jobs, est, target, check)
 
 
 def _resolve_region(stream: Stream, region: FlowRegion | str | None) -> FlowRegion | None:
@@ -218,8 +244,13 @@ def compute_statistics(
     dtype: type = np.float32,
     published: PublishedParams | None = None,
     region: FlowRegion | str | None = "auto",
+    refine: RefineParams | None = None,
 ) -> StreamStatistics:
-    """One pass over the stream feeding the accumulators the ``methods`` need."""
+    """One pass over the stream feeding the accumulators the ``methods`` need.
+
+    ``refine`` (default :data:`~cablesim.perception.refine.DEFAULT_REFINE`) selects the bleed
+    remedies of :mod:`cablesim.perception.refine`: per-sample checks on every flow, and the
+    target pixels allowed to vote (``StreamStatistics.support``)."""
     if isinstance(stream, Sequence) and not isinstance(stream, Stream):
         stream = Stream(list(stream))
     if not isinstance(stream, Stream):
@@ -248,6 +279,9 @@ def compute_statistics(
     corr: dict[int, CorrelationAccumulator] = {}
     seg: dict[int, SegmentationAccumulator] = {}
     counts: dict[int, int] = {}
+    rp = DEFAULT_REFINE if refine is None else refine
+    if not isinstance(rp, RefineParams):
+        raise InputError(f"refine must be a RefineParams, got {type(rp).__name__}")
 
     def feed_current(job: Job, phi: np.ndarray) -> None:
         a = job.action
@@ -264,7 +298,7 @@ def compute_statistics(
     pub_meta: dict[str, Any] = {}
     pub_acc: PublishedAccumulator | None = None
     if not want_pub:
-        for job, phi in iter_flows(stream, est, delta_g, pipelined, queue_size):
+        for job, phi in iter_flows(stream, est, delta_g, pipelined, queue_size, rp):
             feed_current(job, phi)
     else:
         z, f, mdtype = metric_scale(stream, pparams)
@@ -282,11 +316,18 @@ def compute_statistics(
             if pipelined
             else _flows_sequential(units, est, target)
         )
+        check = SampleFilter(rp, target, est) if want_current and rp.per_sample else None
+        pub_check = None
+        if refine is not None and refine.per_sample:
+            pub_check = check if check is not None else SampleFilter(refine, target, est)
         for unit, phi in flows:
             if unit.index in cur:
-                feed_current(cur[unit.index], phi)
+                feed_current(
+                    cur[unit.index], phi if check is None else check.apply(phi, unit.frame)
+                )
             if unit.index in pub:
-                pub_acc.update(pub[unit.index], phi)
+                phi_pub = phi if pub_check is None else pub_check.apply(phi, unit.frame)
+                pub_acc.update(pub[unit.index], phi_pub)
     pub_corr, pub_seg = pub_acc.results() if pub_acc is not None else ({}, {})
     actions = sorted(counts) if counts else sorted(set(pub_corr) | set(pub_seg))
     if not counts:
@@ -303,6 +344,11 @@ def compute_statistics(
         published=pub_corr,
         published_segmentation=pub_seg,
         published_meta=pub_meta,
+        support=support_mask(target, rp) if (want_corr or want_seg) else None,
+        published_support=(
+            support_mask(target, refine) if want_pub and refine is not None else None
+        ),
+        refine=rp.describe(),
     )
 
 
@@ -311,7 +357,19 @@ def masks_from_statistics(
     method: str,
     params: CorrelationParams | SegmentationParams | AblationParams | PublishedParams | None = None,
 ) -> dict[int, np.ndarray]:
-    """Per-action masks of ``method`` from cached statistics."""
+    """Per-action masks of ``method`` from cached statistics (only where ``stats.support``)."""
+    masks = _raw_masks(stats, method, params)
+    support = stats.published_support if method in PUBLISHED_METHODS else stats.support
+    if support is not None:
+        masks = {a: m & support for a, m in masks.items()}
+    return masks
+
+
+def _raw_masks(
+    stats: StreamStatistics,
+    method: str,
+    params: CorrelationParams | SegmentationParams | AblationParams | PublishedParams | None = None,
+) -> dict[int, np.ndarray]:
     if method == "correlation":
         p = params if params is not None else CorrelationParams()
         if not isinstance(p, CorrelationParams):
@@ -376,11 +434,13 @@ def segment_stream(
     pipelined: bool = True,
     queue_size: int = 4,
     region: FlowRegion | str | None = "auto",
+    refine: RefineParams | None = None,
 ) -> StreamSegmentation:
     """Segment the grasped hose in the target frame of ``stream`` with one method.
 
     Returns per-action masks, their vote image, and (correlation, ablation and the published
-    correlation) the c0 and R^2 maps.
+    correlation) the c0 and R^2 maps.  ``refine``: the bleed remedies
+    (:func:`compute_statistics`).
     """
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose from {METHODS}")
@@ -404,6 +464,7 @@ def segment_stream(
         delta_g=delta_g,
         pipelined=pipelined,
         queue_size=queue_size,
+        refine=refine,
         **kw,
     )
     return segment_from_statistics(stats, method, params)

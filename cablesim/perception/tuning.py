@@ -138,7 +138,10 @@ def _scores_for(
         )
     else:
         raise InputError(f"unknown method {method!r}")
-    return _nth_largest(stack.astype(np.float64), n)
+    score = _nth_largest(stack.astype(np.float64), n)
+    if stats.support is not None:  # pixels that may not vote never pass a threshold
+        score = np.where(stats.support, score, -np.inf)
+    return score
 
 
 def tune_thresholds(

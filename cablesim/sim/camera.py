@@ -19,10 +19,14 @@ materials, lights fixed to the world, no shadows, reflections or multisampling) 
 very pixels of a full render, bit for bit, for about a third less work per colour pass;
 otherwise every pass is a full render.
 
-The optional depth noise (``cfg.camera.depth_noise``) is RealSense-like: Gaussian with
-sigma = k z^2, 1 mm quantisation, and dropped pixels (0) at depth discontinuities; it is
-drawn from the seed's ``depth_noise`` stream (:mod:`cablesim.seeding`), so a camera created for the same seed
-produces the same noise sequence.
+The optional depth noise (``cfg.camera.depth_noise``) is RealSense-like: with
+``depth_model = "gaussian"`` Gaussian with sigma = k z^2, 1 mm quantisation, and dropped
+pixels (0) at depth discontinuities; with ``"stereo"`` the block-matching model of
+:mod:`cablesim.sim.sensor` (correlated disparity error, edges fattened or eroded).  The
+optional RGB sensor model (``cfg.camera.rgb_noise``: shot and read noise, exposure and gain,
+:func:`cablesim.sim.sensor.rgb_sensor`) applies to the colour image.  Each is drawn from the
+seed's own stream (``depth_noise``, ``rgb_noise``: :mod:`cablesim.seeding`), so a camera
+created for the same seed produces the same noise sequence.
 """
 
 from __future__ import annotations
@@ -155,6 +159,9 @@ class SimCamera(Camera):
         self.depth_noise = bool(c.depth_noise if depth_noise is None else depth_noise)
         self._noise_std_per_m2 = float(c.depth_noise_std_per_m2)
         self._rng = stream(world.cfg.seed, "depth_noise")
+        self.rgb_noise = bool(c.rgb_noise)
+        self._rgb_rng = stream(world.cfg.seed, "rgb_noise")
+        self._camera_cfg = c
         fovy = float(m.cam_fovy[world.camera_id])
         self._intrinsics = intrinsics_from_fovy(self.width, self.height, fovy)
         # multisampling costs 2-3x on software OpenGL and blurs label boundaries: off by
@@ -420,7 +427,17 @@ class SimCamera(Camera):
         return lut_label[segid], lut_body[segid], depth
 
     def _image(self, rgb: np.ndarray, depth: np.ndarray) -> CameraImage:
-        if self.depth_noise:
+        if self.rgb_noise:
+            from cablesim.sim.sensor import rgb_sensor
+
+            rgb = rgb_sensor(rgb, self._camera_cfg.rgb_sensor, self._rgb_rng)
+        if self.depth_noise and self._camera_cfg.depth_model == "stereo":
+            from cablesim.sim.sensor import stereo_depth
+
+            depth = stereo_depth(
+                depth, self._camera_cfg.depth_stereo, self._intrinsics.f, self._rng
+            )
+        elif self.depth_noise:
             depth = self._noisy(depth)
         return CameraImage(rgb, depth, float(self.world.data.time), self._intrinsics)
 

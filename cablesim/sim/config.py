@@ -171,6 +171,73 @@ class HoseConfig:
 
 
 @dataclass
+class RGBSensorConfig:
+    """The optional RGB sensor model (``cablesim.sim.sensor.rgb_sensor``): the rendered image
+    is taken as the scene radiance; the sensor collects ``full_well * exposure`` electrons at
+    white, adds shot (Poisson) and read noise, applies the gain that restores the brightness
+    (so a short exposure is a noisier image, not a darker one), blurs the noise as demosaicing
+    does, varies the brightness from frame to frame (auto-exposure, mains flicker) and
+    quantises to 8 bits."""
+
+    full_well: float = 4000.0  # electrons at white, nominal exposure
+    read_noise: float = 4.0  # electrons (std)
+    exposure: float = 1.0  # fraction of the nominal light collected; the gain is 1 / exposure
+    frame_gain_jitter: float = 0.01  # std of the per-frame brightness factor
+    demosaic_sigma: float = 0.6  # px, Gaussian correlation of the noise (0: independent)
+
+    def validate(self) -> None:
+        check_positive("camera.rgb_sensor.full_well", self.full_well)
+        check_positive("camera.rgb_sensor.read_noise", self.read_noise, allow_zero=True)
+        check_positive("camera.rgb_sensor.exposure", self.exposure)
+        if self.exposure > 1:
+            raise ConfigError(
+                "camera.rgb_sensor.exposure", f"must be in (0, 1], got {self.exposure}"
+            )
+        check_positive("camera.rgb_sensor.frame_gain_jitter", self.frame_gain_jitter, True)
+        check_positive("camera.rgb_sensor.demosaic_sigma", self.demosaic_sigma, True)
+
+
+DEPTH_MODELS = ("gaussian", "stereo")
+
+
+@dataclass
+class StereoDepthConfig:
+    """The stereo-like depth model (``cablesim.sim.sensor.stereo_depth``), modelled on an active
+    IR stereo camera with block matching (RealSense D4xx): the error lives in disparity
+    (sigma_z = z^2 sigma_d / (f b)), it is spatially correlated over the matching window, and at
+    depth edges the window's winner spreads the near surface over the far one (fattening) or
+    the far one over a thin near object (erosion) by up to ``edge_px`` pixels, in patches
+    ``edge_scale_px`` long; some edge pixels return nothing."""
+
+    baseline: float = 0.095  # m, the D456's stereo baseline
+    disparity_noise: float = 0.08  # px (std), sub-pixel matching error
+    window_px: int = 7  # matching window: the error's correlation length
+    edge_px: int = 2  # largest fattening / erosion at a depth edge, pixels
+    edge_scale_px: float = 12.0  # px, length of the patches that fatten or erode alike
+    fatten_probability: float = 0.6  # share of edge patches where the near surface spreads
+    edge_jump: float = 0.005  # m: a neighbourhood spanning more depth than this is an edge
+    edge_dropout: float = 0.15  # probability that an edge pixel returns nothing
+    quantum: float = 0.001  # m, depth unit
+
+    def validate(self) -> None:
+        check_positive("camera.depth_stereo.baseline", self.baseline)
+        check_positive("camera.depth_stereo.disparity_noise", self.disparity_noise, True)
+        for name in ("window_px", "edge_px"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ConfigError(
+                    f"camera.depth_stereo.{name}", f"must be an integer >= 0, got {v!r}"
+                )
+        check_positive("camera.depth_stereo.edge_scale_px", self.edge_scale_px)
+        for name in ("fatten_probability", "edge_dropout"):
+            v = getattr(self, name)
+            if not 0 <= v <= 1:
+                raise ConfigError(f"camera.depth_stereo.{name}", f"must be in [0, 1], got {v}")
+        check_positive("camera.depth_stereo.edge_jump", self.edge_jump)
+        check_positive("camera.depth_stereo.quantum", self.quantum, True)
+
+
+@dataclass
 class CameraConfig:
     """A fixed RGB-D camera modelled on an Intel RealSense D456.
 
@@ -188,7 +255,7 @@ class CameraConfig:
     position_jitter: float = 0.0  # metres, uniform per axis (randomised camera pose)
     look_at_jitter: float = 0.0
     depth_noise: bool = False
-    depth_noise_std_per_m2: float = 0.0015  # RealSense-like: sigma = k * z^2
+    depth_noise_std_per_m2: float = 0.0015  # RealSense-like: sigma = k * z^2 ("gaussian")
     near: float = 0.05
     far: float = 5.0
     # stacks of the rendered spheres and capsule caps (MuJoCo's default is 16).  A hose is
@@ -197,6 +264,24 @@ class CameraConfig:
     # most one grey level, no label) on the seed-2 start image; with the arm in view also
     # ~1,400 pixels on its capsule ends.  16 renders exactly as MuJoCo's default.
     sphere_stacks: int = 8
+    # the depth noise model: "gaussian" (per pixel, sigma = k z^2, quantised, edge dropout)
+    # or "stereo" (correlated disparity error, edges fattened or eroded: ``depth_stereo``)
+    depth_model: str = "gaussian"
+    depth_stereo: StereoDepthConfig = field(default_factory=StereoDepthConfig)
+    rgb_noise: bool = False  # the RGB sensor model (``rgb_sensor``); off: the rendered image
+    rgb_sensor: RGBSensorConfig = field(default_factory=RGBSensorConfig)
+
+    @classmethod
+    def thesis(cls, **changes: object) -> CameraConfig:
+        """The thesis's image geometry: the D456 colour stream at 1280x720 (about 89 x 58
+        degrees), where a 15 mm hose at 1 m is about 9-10 px wide (SPEC section 8)."""
+        return cls(**{"width": 1280, "height": 720, "fovy": 58.0, **changes})  # type: ignore[arg-type]
+
+    @classmethod
+    def realistic(cls, **changes: object) -> CameraConfig:
+        """Both noise models on (RGB sensor noise, stereo-like depth), as SPEC section 7 asks
+        of every result with estimated flow."""
+        return cls(**{"rgb_noise": True, "depth_noise": True, "depth_model": "stereo", **changes})  # type: ignore[arg-type]
 
     def validate(self) -> None:
         check_fields(self, "camera.")
@@ -210,6 +295,17 @@ class CameraConfig:
         check_positive("camera.position_jitter", self.position_jitter, allow_zero=True)
         check_positive("camera.look_at_jitter", self.look_at_jitter, allow_zero=True)
         check_positive("camera.depth_noise_std_per_m2", self.depth_noise_std_per_m2, True)
+        if self.depth_model not in DEPTH_MODELS:
+            raise ConfigError(
+                "camera.depth_model", f"unknown {self.depth_model!r}; choose one of {DEPTH_MODELS}"
+            )
+        for name in ("depth_noise", "rgb_noise"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(
+                    f"camera.{name}", f"must be true or false, got {getattr(self, name)!r}"
+                )
+        self.depth_stereo.validate()
+        self.rgb_sensor.validate()
         if not 0 < self.near < self.far:
             raise ConfigError("camera.near", "need 0 < near < far")
         pos = check_vector("camera.position", self.position, 3, WORLD_LIMIT)

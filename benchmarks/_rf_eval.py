@@ -1,0 +1,650 @@
+"""Perception half of ``benchmarks/realistic_flow.py``: variants on the recorded streams.
+
+A recorded stream is read lean (RGB, arm mask and gripper of every frame; depth and labels of
+the target only), optionally given the camera's noise models (:mod:`cablesim.sim.sensor`,
+seeded from the scene's ``rgb_noise`` / ``depth_noise`` streams, frames in order), and every
+flow back end runs **once** per stream while one set of accumulators per per-sample variant
+(arm masks, photometric check, forward-backward) consumes it -- the same accumulators and
+filters :func:`cablesim.perception.pipeline.compute_statistics` uses (``check_equivalence``
+shows the result is identical).  What threshold tuning needs of the statistics (|c0|, R^2,
+std(d_phi), vote fractions) is cached per (scene, noise, flow, variant) as float16 maps, so
+the support variants (foreground, contrast: target-frame cues) and the tuning run without
+recomputing flow.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from _rf_record import CACHE, TAG, Scene
+
+from cablesim.perception.actions import action_direction
+from cablesim.perception.correlation import (
+    CorrelationAccumulator,
+    CorrelationParams,
+    CorrelationResult,
+)
+from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow, RegionFlow
+from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
+from cablesim.perception.pipeline import StreamStatistics, plan_jobs
+from cablesim.perception.refine import (
+    ContrastParams,
+    ForegroundParams,
+    RefineParams,
+    SampleFilter,
+    contrast_mask,
+    foreground_mask,
+)
+from cablesim.perception.segmentation import SegmentationAccumulator, SegmentationResult
+
+STATS = CACHE / TAG / "stats"
+
+
+# --------------------------------------------------------------------------------- streams
+def _load_npz(path: Path, keys: Sequence[str]) -> dict[str, np.ndarray]:
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in keys if k in z.files}
+
+
+@dataclass
+class LeanStream:
+    scene: Scene
+    stream: Stream
+    hose: int
+    truth: np.ndarray  # the grasped hose in the target frame
+    labels: np.ndarray  # target labels
+    clean_depth: np.ndarray  # target depth without noise
+    flow_files: dict[int, Path]  # id(frame) -> its ground-truth flow file
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+def load_stream(scene: Scene, noisy: bool) -> LeanStream:
+    """The recorded stream of ``scene`` (module docstring); ``noisy`` applies the sensor models
+    of ``CameraConfig.realistic()`` (RGB of every frame, depth of the target)."""
+    from cablesim.seeding import stream as rng_stream
+    from cablesim.sim.config import CameraConfig
+    from cablesim.sim.sensor import rgb_sensor, stereo_depth
+
+    root = scene.path
+    doc = json.loads((root / "meta.json").read_text())
+    K = Intrinsics.from_dict(doc["intrinsics"])
+    entries = [json.loads(x) for x in (root / "index.jsonl").read_text().splitlines() if x.strip()]
+    frames_e = sorted((e for e in entries if e["kind"] == "frame"), key=lambda e: e["i"])
+    flows_e = {e["i"]: root / e["file"] for e in entries if e["kind"] == "flow"}
+    cam = CameraConfig.realistic()
+    rgb_rng = rng_stream(scene.seed, "rgb_noise")
+    depth_rng = rng_stream(scene.seed, "depth_noise")
+    frames: list[Frame] = []
+    files: dict[int, Path] = {}
+    n = len(frames_e)
+    labels = clean_depth = None
+    hose = -1
+    for j, e in enumerate(frames_e):
+        last = j == n - 1
+        keys = ["rgb", "gripper", "action", "sample", "timestamp", "arm_mask"]
+        if last:
+            keys += ["depth", "labels", "grasped_hose"]
+        a = _load_npz(root / e["file"], keys)
+        rgb = a["rgb"]
+        if noisy:
+            rgb = rgb_sensor(rgb, cam.rgb_sensor, rgb_rng)
+        depth = None
+        truth = None
+        if last:
+            clean_depth = a["depth"]
+            depth = (
+                stereo_depth(clean_depth, cam.depth_stereo, K.f, depth_rng)
+                if noisy
+                else clean_depth
+            )
+            labels = a["labels"]
+            hose = int(a["grasped_hose"])
+            truth = FrameTruth(labels=labels, grasped_hose=hose)
+        f = Frame(
+            rgb=rgb,
+            depth=depth,
+            intrinsics=K,
+            gripper=a["gripper"],
+            action=int(a["action"]),
+            sample=int(a["sample"]),
+            timestamp=float(a["timestamp"]),
+            truth=truth,
+            arm_mask=a.get("arm_mask"),
+        )
+        if e["i"] in flows_e:
+            files[id(f)] = flows_e[e["i"]]
+        frames.append(f)
+    meta = doc.get("meta") or {}
+    if hose < 0:
+        hose = int(meta.get("hose", -1))
+    assert labels is not None and clean_depth is not None
+    return LeanStream(
+        scene, Stream(frames, meta), hose, labels == hose, labels, clean_depth, files, meta
+    )
+
+
+class RecordedOracle(OracleFlow):
+    """The recorded ground-truth flow, read frame by frame from the recording."""
+
+    def __init__(self, lean: LeanStream) -> None:
+        super().__init__()
+        self.files = lean.flow_files
+
+    def frame_flow(self, frame: Frame, target: Frame) -> np.ndarray:
+        h, w = target.shape
+        if frame is target:
+            return np.zeros((h, w, 2), np.float32)
+        a = _load_npz(self.files[id(frame)], ["flow_to_target", "flow_valid"])
+        flow = np.array(a["flow_to_target"], np.float32)
+        flow[~a["flow_valid"]] = 0.0
+        flow[~np.isfinite(flow)] = 0.0
+        return flow
+
+
+# --------------------------------------------------------------------------------- variants
+def board_crop(scene: Scene, K: Intrinsics, margin: int = 8) -> tuple[int, int, int, int]:
+    from cablesim.sim.regions import board_region
+
+    return board_region(scene.config().scene_config(), K, margin)
+
+
+FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {
+    "oracle": lambda s: RecordedOracle(s),
+    "dis-medium": lambda s: DISFlow("medium"),
+    "dis-fast": lambda s: DISFlow("fast"),
+    "dis-fine": lambda s: DISFlow("medium", finest_scale=1, patch_size=8, patch_stride=4),
+    "dis-fine-gd12": lambda s: DISFlow(
+        "medium", finest_scale=1, patch_size=8, patch_stride=4, gradient_descent_iters=12
+    ),
+    "dis-medium-board1.5": lambda s: RegionFlow(
+        DISFlow("medium"), board_crop(s.scene, s.stream.intrinsics), 1.5
+    ),
+    "dis-fast-board1.5": lambda s: RegionFlow(
+        DISFlow("fast"), board_crop(s.scene, s.stream.intrinsics), 1.5
+    ),
+}
+
+SAMPLES: dict[str, RefineParams] = {
+    "raw": RefineParams(arm_masks=False),
+    "arm": RefineParams(arm_masks=True),
+    "arm+photo20": RefineParams(photometric=20.0),
+    "arm+photo30": RefineParams(photometric=30.0),
+    "arm+photo45": RefineParams(photometric=45.0),
+    "arm+fb1": RefineParams(forward_backward=1.0),
+}
+
+SUPPORTS: dict[str, RefineParams | None] = {
+    "none": None,
+    "fg": RefineParams(foreground=ForegroundParams()),
+    "fg-d1": RefineParams(foreground=ForegroundParams(dilate_px=1)),
+    "fg-h8": RefineParams(foreground=ForegroundParams(min_height=0.008)),
+    "fg-c2": RefineParams(foreground=ForegroundParams(colour_px=2)),
+    "fg-c3": RefineParams(foreground=ForegroundParams(colour_px=3)),
+    "fg-c4": RefineParams(foreground=ForegroundParams(colour_px=4)),
+    "fg-c3-w5": RefineParams(foreground=ForegroundParams(colour_px=3, window_m=0.05)),
+    "fg-c3-w7": RefineParams(foreground=ForegroundParams(colour_px=3, window_m=0.07)),
+    "fg-c3-h3": RefineParams(foreground=ForegroundParams(colour_px=3, min_height=0.003)),
+    "contrast": RefineParams(contrast=ContrastParams()),
+    "fg&contrast": RefineParams(foreground=ForegroundParams(), contrast=ContrastParams()),
+}
+
+
+def support_for(name: str, target: Frame) -> np.ndarray | None:
+    p = SUPPORTS[name]
+    if p is None:
+        return None
+    out = None
+    if p.foreground is not None:
+        out = foreground_mask(target.depth, target.intrinsics, p.foreground, target.rgb)
+    if p.contrast is not None:
+        c = contrast_mask(target.rgb, target.intrinsics, target.depth, p.contrast)
+        out = c if out is None else out & c
+    return out
+
+
+# --------------------------------------------------------------------------------- statistics
+@dataclass
+class Timing:
+    flow_s: float = 0.0
+    frames: int = 0
+    per_variant_s: dict[str, float] = field(default_factory=dict)
+
+
+def compute_variants(
+    lean: LeanStream, flow: FlowEstimator, samples: Sequence[str], timing: Timing | None = None
+) -> dict[str, StreamStatistics]:
+    """One flow pass over the stream; one set of accumulators per per-sample variant."""
+    stream = lean.stream
+    target = stream.target
+    shape, focal = target.shape, target.intrinsics.f
+    jobs = plan_jobs(stream)
+    checks = {s: SampleFilter(SAMPLES[s], target, flow) for s in samples}
+    corr: dict[str, dict[int, CorrelationAccumulator]] = {s: {} for s in samples}
+    seg: dict[str, dict[int, SegmentationAccumulator]] = {s: {} for s in samples}
+    counts: dict[int, int] = {}
+    for job in jobs:
+        t0 = time.process_time()
+        phi = flow.frame_flow(job.frame, target)
+        if timing is not None:
+            timing.flow_s += time.process_time() - t0
+            timing.frames += 1
+        a = job.action
+        counts[a] = counts.get(a, 0) + 1
+        for s in samples:
+            t1 = time.process_time()
+            ph = checks[s].apply(phi, job.frame) if SAMPLES[s].per_sample else phi
+            if a not in corr[s]:
+                corr[s][a] = CorrelationAccumulator(shape, focal, CorrelationParams(), target.depth)
+                seg[s][a] = SegmentationAccumulator(shape)
+            corr[s][a].update(ph, job.d_g, job.z)
+            seg[s][a].update(ph)
+            if timing is not None:
+                timing.per_variant_s[s] = (
+                    timing.per_variant_s.get(s, 0.0) + time.process_time() - t1
+                )
+    actions = sorted(counts)
+    out = {}
+    for s in samples:
+        out[s] = StreamStatistics(
+            shape=shape,
+            actions=actions,
+            n_samples=counts,
+            correlation={a: acc.result() for a, acc in corr[s].items()},
+            segmentation={a: acc.result() for a, acc in seg[s].items()},
+            directions={a: action_direction(stream.action_frames(a)) for a in actions},
+            flow=flow.describe(),
+            support=~target.arm_mask
+            if SAMPLES[s].arm_masks and target.arm_mask is not None
+            else None,
+        )
+    return out
+
+
+def _stats_path(scene: Scene, noisy: bool, flow: str, sample: str) -> Path:
+    if flow == "oracle" and SAMPLES[sample].photometric is None:
+        noisy = False  # ground-truth flow and arm masks do not see the sensor noise
+    return STATS / scene.name / ("noisy" if noisy else "clean") / flow / f"{sample}.npz"
+
+
+def save_stats(path: Path, st: StreamStatistics) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    arrays: dict[str, np.ndarray] = {"actions": np.array(st.actions), "shape": np.array(st.shape)}
+    for a in st.actions:
+        c = st.correlation[a]
+        arrays[f"c0_{a}"] = np.abs(c.c0).astype(np.float16)
+        arrays[f"r2_{a}"] = c.r2.astype(np.float16)
+        arrays[f"std_{a}"] = c.std_dphi.astype(np.float32)
+        sr = st.segmentation[a]
+        arrays[f"votes_{a}"] = sr.votes.astype(np.uint16)
+        arrays[f"nseg_{a}"] = np.array(sr.n_samples)
+        arrays[f"ncorr_{a}"] = np.array(c.n_samples)
+    if st.support is not None:
+        arrays["support"] = st.support
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez_compressed(tmp, **arrays)
+    tmp.replace(path)
+
+
+def load_stats(path: Path) -> StreamStatistics:
+    with np.load(path, allow_pickle=False) as z:
+        actions = [int(a) for a in z["actions"]]
+        shape = tuple(int(x) for x in z["shape"])
+        corr, seg = {}, {}
+        zero = np.zeros(shape, np.float32)
+        for a in actions:
+            c0 = z[f"c0_{a}"].astype(np.float32)
+            corr[a] = CorrelationResult(
+                n=zero,
+                c0=c0,
+                c1=zero,
+                r2=z[f"r2_{a}"].astype(np.float32),
+                psi=np.zeros((*shape, 2), np.float32),
+                std_dphi=z[f"std_{a}"],
+                n_samples=int(z[f"ncorr_{a}"]),
+            )
+            seg[a] = SegmentationResult(z[f"votes_{a}"].astype(np.float32), int(z[f"nseg_{a}"]))
+        support = z["support"] if "support" in z.files else None
+    return StreamStatistics(
+        shape=shape,  # type: ignore[arg-type]
+        actions=actions,
+        n_samples={},
+        correlation=corr,
+        segmentation=seg,
+        support=support,
+    )
+
+
+def ensure_stats(
+    scenes: Sequence[Scene],
+    noisy: bool,
+    plan: dict[str, Sequence[str]],
+    log=print,
+) -> dict[str, Any]:
+    """Compute (or find cached) statistics of every scene for ``plan`` (flow -> per-sample
+    variants); returns per-frame timings (CPU ms) of what was computed."""
+    timings: dict[str, Any] = {}
+    for sc in scenes:
+        todo = {
+            f: [s for s in samples if not _stats_path(sc, noisy, f, s).exists()]
+            for f, samples in plan.items()
+        }
+        todo = {f: s for f, s in todo.items() if s}
+        if not todo:
+            continue
+        t0 = time.time()
+        lean = load_stream(sc, noisy)
+        # the target-frame cues need the target: keep it beside the statistics
+        tpath = STATS / sc.name / ("noisy" if noisy else "clean") / "target.npz"
+        if not tpath.exists():
+            tpath.parent.mkdir(parents=True, exist_ok=True)
+            t = lean.stream.target
+            np.savez_compressed(
+                tpath,
+                rgb=t.rgb,
+                depth=t.depth,
+                labels=lean.labels,
+                hose=np.array(lean.hose),
+                clean_depth=lean.clean_depth,
+                arm=t.arm_mask if t.arm_mask is not None else np.zeros(t.shape, bool),
+                K=np.array(
+                    [
+                        t.intrinsics.fx,
+                        t.intrinsics.fy,
+                        t.intrinsics.cx,
+                        t.intrinsics.cy,
+                        t.intrinsics.width,
+                        t.intrinsics.height,
+                    ]
+                ),
+            )
+        for f, ss in todo.items():
+            tm = Timing()
+            est = FLOWS[f](lean)
+            stats = compute_variants(lean, est, ss, tm)
+            for s, st in stats.items():
+                save_stats(_stats_path(sc, noisy, f, s), st)
+            timings[f"{sc.name}/{f}"] = {
+                "flow_ms": 1e3 * tm.flow_s / max(tm.frames, 1),
+                **{s: 1e3 * v / max(tm.frames, 1) for s, v in tm.per_variant_s.items()},
+            }
+        log(
+            f"  {sc.name} {'noisy' if noisy else 'clean'}: {sorted(todo)} in {time.time() - t0:.0f} s"
+        )
+        del lean
+    return timings
+
+
+@dataclass
+class Target:
+    rgb: np.ndarray
+    depth: np.ndarray
+    clean_depth: np.ndarray
+    labels: np.ndarray
+    hose: int
+    arm: np.ndarray
+    K: Intrinsics
+
+    @property
+    def truth(self) -> np.ndarray:
+        return self.labels == self.hose
+
+    def frame(self, clean_depth: bool = False) -> Frame:
+        return Frame(
+            self.rgb,
+            self.clean_depth if clean_depth else self.depth,
+            self.K,
+            np.zeros(3),
+            arm_mask=self.arm,
+        )
+
+
+def load_target(scene: Scene, noisy: bool) -> Target:
+    p = STATS / scene.name / ("noisy" if noisy else "clean") / "target.npz"
+    with np.load(p) as z:
+        k = z["K"]
+        K = Intrinsics(float(k[0]), float(k[1]), float(k[2]), float(k[3]), int(k[4]), int(k[5]))
+        return Target(
+            z["rgb"], z["depth"], z["clean_depth"], z["labels"], int(z["hose"]), z["arm"], K
+        )
+
+
+def stats_for(scene: Scene, noisy: bool, flow: str, sample: str) -> StreamStatistics:
+    return load_stats(_stats_path(scene, noisy, flow, sample))
+
+
+# --------------------------------------------------------------------------------- tuning
+GRID = np.round(np.arange(0.0, 1.0, 0.02), 4)  # c0_min, R2_min, tau_v
+STD_GRID = np.round(np.arange(0.0, 0.05, 0.0005), 6)  # ablation std_min (m)
+BETAS = (1.0, 0.5, 0.4, 0.3)
+
+
+def _union_score(st: StreamStatistics, method: str, c0_min: float = 0.0) -> np.ndarray:
+    """Per-pixel score whose ``> t`` is the union (>= 1 vote) mask at threshold t."""
+    acts = st.actions
+    if method == "correlation":
+        s = np.max(
+            [
+                np.where(np.abs(st.correlation[a].c0) > c0_min, st.correlation[a].r2, -1.0)
+                for a in acts
+            ],
+            0,
+        )
+    elif method == "segmentation":
+        s = np.max([st.segmentation[a].fraction for a in acts], 0)
+    elif method == "ablation":
+        s = np.max([st.correlation[a].std_dphi for a in acts], 0)
+    else:
+        raise ValueError(method)
+    if st.support is not None:
+        s = np.where(st.support, s, -1.0)
+    return s
+
+
+def _counts(score: np.ndarray, truth: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, ...]:
+    """tp(t), fp(t) of ``score > t`` for every t of ``grid``, and the truth size (exact)."""
+    b = np.searchsorted(grid, score.ravel(), side="left")  # value > grid[j] iff j < b
+    n = len(grid) + 1
+    t = truth.ravel()
+    pos = np.bincount(b[t], minlength=n)
+    neg = np.bincount(b[~t], minlength=n)
+    # count of b > j = sum_{k > j} hist[k]
+    tp = np.cumsum(pos[::-1])[::-1][1:]
+    fp = np.cumsum(neg[::-1])[::-1][1:]
+    return tp.astype(float), fp.astype(float), int(t.sum())
+
+
+def _prf(tp, fp, npos):
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = np.where(tp + fp > 0, tp / np.maximum(tp + fp, 1), np.nan)
+        r = tp / max(npos, 1)
+        iou = tp / np.maximum(npos + fp, 1)
+    return p, r, iou
+
+
+def _fb(p, r, beta):
+    b2 = beta * beta
+    p0 = np.nan_to_num(p)
+    den = b2 * p0 + r
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, (1 + b2) * p0 * r / den, 0.0)
+
+
+class _Sub:
+    """The maps of ``st`` at the pixels of ``live`` only (1-D), for fast tuning."""
+
+    def __init__(self, st: StreamStatistics, live: np.ndarray) -> None:
+        from types import SimpleNamespace as NS
+
+        self.actions = st.actions
+        self.support = None
+        self.correlation = {
+            a: NS(c0=c.c0[live], r2=c.r2[live], std_dphi=c.std_dphi[live])
+            for a, c in st.correlation.items()
+        }
+        self.segmentation = {a: NS(fraction=r.fraction[live]) for a, r in st.segmentation.items()}
+
+
+@dataclass
+class Tuned:
+    method: str
+    params: dict[float, dict[str, float]]  # beta -> thresholds
+    val: dict[float, dict[str, float]]  # beta -> validation scores at those thresholds
+
+
+def tune(stats: Sequence[StreamStatistics], truths: Sequence[np.ndarray], method: str) -> Tuned:
+    """Thresholds maximising the mean F_beta over the sequences (empty prediction: F = 0),
+    per beta; union of the actions.  Same objective and grid as
+    :func:`cablesim.perception.tuning.tune_thresholds` (computed by counting, not sorting)."""
+    if method == "correlation":
+        outer, inner, names = GRID, GRID, ("c0_min", "r2_min")
+    elif method == "segmentation":
+        outer, inner, names = np.array([np.nan]), GRID, (None, "tau_v")
+    else:
+        outer, inner, names = np.array([np.nan]), STD_GRID, (None, "std_min")
+    F = {b: np.zeros((len(outer), len(inner))) for b in BETAS}
+    P = np.zeros((len(outer), len(inner)))
+    Pn = np.zeros_like(P)
+    R = np.zeros_like(P)
+    J = np.zeros_like(P)
+    for st, t in zip(stats, truths, strict=True):
+        # only pixels that can pass some threshold matter (score > 0 at the lowest c0_min)
+        live = _union_score(st, method, -1.0) > 0
+        npos = int(t.sum())
+        sub = _Sub(st, live)
+        tl = t[live]
+        for i, c in enumerate(outer):
+            score = _union_score(sub, method, 0.0 if np.isnan(c) else c)
+            tp, fp, _ = _counts(score, tl, inner)
+            p, r, iou = _prf(tp, fp, npos)
+            P[i] += np.nan_to_num(p)
+            Pn[i] += np.isfinite(p)
+            R[i] += r
+            J[i] += iou
+            for b in BETAS:
+                F[b][i] += _fb(p, r, b)
+    k = len(stats)
+    params, val = {}, {}
+    for b in BETAS:
+        i, j = np.unravel_index(np.argmax(F[b]), F[b].shape)
+        pr = {names[1]: float(inner[j])}
+        if names[0]:
+            pr[names[0]] = float(outer[i])
+        params[b] = pr
+        val[b] = {
+            "precision": P[i, j] / max(Pn[i, j], 1),
+            "recall": R[i, j] / k,
+            "f": F[b][i, j] / k,
+            "iou": J[i, j] / k,
+        }
+    return Tuned(method, params, val)
+
+
+def union_mask(st: StreamStatistics, method: str, pr: dict[str, float]) -> np.ndarray:
+    if method == "correlation":
+        return _union_score(st, method, pr["c0_min"]) > pr["r2_min"]
+    if method == "segmentation":
+        return _union_score(st, method) > pr["tau_v"]
+    return _union_score(st, method) > pr["std_min"]
+
+
+def score_row(preds: Sequence[np.ndarray], truths: Sequence[np.ndarray], beta: float = 0.4) -> dict:
+    """Mean over sequences (SPEC 7): precision over non-empty predictions (nanmean), recall,
+    F_beta (0 for an empty prediction) and IoU over all."""
+    P, R, F, J = [], [], [], []
+    if not preds:
+        nan = float("nan")
+        return {
+            "precision": nan,
+            "recall": nan,
+            "f": nan,
+            "iou": nan,
+            "empty": 0,
+            "n": 0,
+            "per_scene": [],
+        }
+    for m, t in zip(preds, truths, strict=True):
+        tp = float((m & t).sum())
+        fp = float(m.sum()) - tp
+        npos = float(t.sum())
+        p = tp / (tp + fp) if tp + fp > 0 else np.nan
+        r = tp / max(npos, 1)
+        P.append(p)
+        R.append(r)
+        F.append(float(_fb(np.array(p), np.array(r), beta)))
+        J.append(tp / max(npos + fp, 1))
+    P = np.array(P)
+    return {
+        "precision": float(np.nanmean(P)) if np.isfinite(P).any() else float("nan"),
+        "recall": float(np.mean(R)),
+        "f": float(np.mean(F)),
+        "iou": float(np.mean(J)),
+        "empty": int(np.sum(~np.isfinite(P))),
+        "n": len(P),
+        "per_scene": [
+            {"precision": None if not np.isfinite(p) else float(p), "recall": r, "f": f, "iou": j}
+            for p, r, f, j in zip(P, R, F, J, strict=True)
+        ],
+    }
+
+
+def fp_near_hose(preds: Sequence[np.ndarray], targets: Sequence[Target], px: float = 5.0) -> float:
+    """Share of all false positives that lie on a hose or within ``px`` of one."""
+    import cv2
+
+    near = far = 0
+    for m, tg in zip(preds, targets, strict=True):
+        fp = m & ~tg.truth
+        hose = (tg.labels >= 0).astype(np.uint8)
+        d = cv2.distanceTransform(1 - hose, cv2.DIST_L2, 5)
+        near += int((fp & (d <= px)).sum())
+        far += int((fp & (d > px)).sum())
+    return near / max(near + far, 1)
+
+
+# --------------------------------------------------------------------------------- proposals
+def grade_proposals(scene: Scene, votes: dict[str, np.ndarray], tg: Target) -> dict[str, Any]:
+    """The grasp sampler's next proposal from each vote image of ``votes`` (one grasp done),
+    as the exploration loop makes it: the robot's reachability callback, the first grasp
+    recorded as a previous (blacklisted) grasp, the front-most part of the proposal kept;
+    graded against the target labels (SPEC 7), with every candidate the robot could not
+    reach graded too (unreachable).  One simulated session (for the robot) per scene."""
+    from cablesim.perception.grasp_sampler import GraspSampler
+    from cablesim.perception.metrics import grade_proposal
+    from cablesim.policies.explore import front_segment, grasp_reachability
+    from cablesim.sim.session import SimSession
+
+    meta = json.loads((scene.path / "meta.json").read_text())["meta"]
+    T = np.asarray(meta["T_world_camera"], float)
+    seg = np.zeros(tg.truth.shape, bool)
+    px = np.asarray(meta["segment_px"], int)
+    seg[px[:, 1], px[:, 0]] = True
+    centre = meta["result"].get("centre")
+    c_cam = None if centre is None else ((np.asarray(centre)[None] - T[:3, 3]) @ T[:3, :3])[0]
+    session = SimSession.build(scene.config())
+    out: dict[str, Any] = {}
+    try:
+        reach = grasp_reachability(session.robot, T, session.cfg.interaction)
+        for name, v in votes.items():
+            sampler = GraspSampler(reachability=reach)
+            if c_cam is not None:
+                sampler.add_grasp(c_cam, seg, blacklist=True)
+            sr = sampler.propose(v.astype(np.int32), tg.depth, tg.K)
+            grades: list[str] = []
+            for c in sr.candidates:
+                if (c.rejected or "").startswith("unreachable") and c.mask.any():
+                    grades.append(grade_proposal(c.mask, tg.labels, tg.hose, False))
+            first = None
+            if sr.proposal is not None:
+                chosen = front_segment(sr.proposal.mask, tg.depth)
+                first = grade_proposal(chosen, tg.labels, tg.hose, True)
+                grades.append(first)
+            out[name] = {"proposal": first, "grades": grades, "rejections": sr.rejections()}
+    finally:
+        session.close()
+    return out

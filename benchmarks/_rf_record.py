@@ -1,0 +1,165 @@
+"""Recording half of ``benchmarks/realistic_flow.py``: one grasp interaction per scene, recorded
+once into a cache outside the repository and reused by every perception variant.
+
+Each scene: ``EpisodeConfig(seed=s, perturb=PerturbConfig(enabled=True))`` with kinematic arm
+masks captured (``capture.arm_masks``), ground truth on, the camera noise-free (the noise
+models of :mod:`cablesim.sim.sensor` are applied to the recorded clean images when perception
+runs, so every noisy result has its noise-free twin on the very same interaction).  A scene
+whose interaction fails leaves ``<dir>.failed.json`` with the reason; a scene already recorded
+(or failed) is skipped, so the recording resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+import traceback
+from collections.abc import Iterable
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass
+from pathlib import Path
+
+CACHE = Path(os.environ.get("CABLESIM_STREAMS", Path.home() / ".cache" / "cablesim" / "streams"))
+#: bump when the recorded interaction changes (a new tag records into a new folder)
+TAG = "rf1"
+
+
+@dataclass(frozen=True)
+class Scene:
+    split: str  # "val" | "test"
+    seed: int
+    board: str  # "wood" | "solid"
+    geometry: str = "default"  # "default" (640x480) | "thesis" (1280x720)
+
+    @property
+    def name(self) -> str:
+        return f"{self.split}-{self.seed}-{self.board}-{self.geometry}"
+
+    @property
+    def path(self) -> Path:
+        return CACHE / TAG / self.name
+
+    @property
+    def failed_path(self) -> Path:
+        return self.path.with_name(self.path.name + ".failed.json")
+
+    def status(self) -> str:
+        """'ok' (complete recording), 'failed' or 'todo'."""
+        if self.failed_path.exists():
+            return "failed"
+        meta = self.path / "meta.json"
+        if meta.exists():
+            try:
+                if json.loads(meta.read_text()).get("complete"):
+                    return "ok"
+            except (OSError, ValueError):
+                pass
+        return "todo"
+
+    def config(self):
+        from cablesim.episode.config import CaptureConfig, InteractionConfig
+        from cablesim.sim.config import BoardConfig, CameraConfig, SceneConfig
+        from cablesim.sim.perturb import PerturbConfig
+        from cablesim.sim.session import EpisodeConfig
+
+        camera = CameraConfig.thesis() if self.geometry == "thesis" else CameraConfig()
+        return EpisodeConfig(
+            seed=self.seed,
+            scene=SceneConfig(board=BoardConfig(background=self.board), camera=camera),
+            interaction=InteractionConfig(capture=CaptureConfig(arm_masks=True)),
+            perturb=PerturbConfig(enabled=True),
+        )
+
+
+def record_scene(scene: Scene) -> tuple[Scene, str, float]:
+    """Simulate and record one scene (in a worker process); (scene, status, seconds)."""
+    import cablesim  # noqa: F401  (headless GL before mujoco)
+    from cablesim.sim.session import simulate_episode
+
+    t0 = time.process_time()
+    if scene.status() != "todo":
+        return scene, scene.status(), 0.0
+    scene.path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        ep = simulate_episode(scene.config(), record_to=scene.path, overwrite=True)
+        ok, reason = ep.result.success, ep.result.reason
+        ep.close()
+    except Exception as e:  # noqa: BLE001 - a failed scene is recorded as failed
+        ok, reason = False, f"{type(e).__name__}: {e}\n{traceback.format_exc(limit=3)}"
+    if not ok:
+        scene.failed_path.write_text(json.dumps({"scene": scene.name, "reason": reason}))
+    return scene, scene.status(), time.process_time() - t0
+
+
+def _record_split(pool, split: str, seeds: Iterable[int], want: int, geometry: str, log) -> list:
+    """Wood-board scenes of ``split`` from ``seeds`` (in order) until ``want`` succeeded."""
+    ok: list[Scene] = []
+    pending: dict[Future, Scene] = {}
+    it = iter(seeds)
+
+    def submit_next() -> bool:
+        for seed in it:
+            sc = Scene(split, seed, "wood", geometry)
+            st = sc.status()
+            if st == "ok":
+                ok.append(sc)
+                if len(ok) >= want:
+                    return False
+                continue
+            if st == "failed":
+                continue
+            pending[pool.submit(record_scene, sc)] = sc
+            return True
+        return False
+
+    while len(ok) + len(pending) < want and submit_next():
+        pass
+    while pending:
+        done, _ = wait(pending, return_when=FIRST_COMPLETED)
+        for fut in done:
+            sc = pending.pop(fut)
+            _, st, secs = fut.result()
+            log(f"  {sc.name}: {st} ({secs:.0f} s CPU)")
+            if st == "ok":
+                ok.append(sc)
+        while len(ok) + len(pending) < want and submit_next():
+            pass
+    ok.sort(key=lambda s: s.seed)
+    return ok[:want]
+
+
+def record(
+    splits: dict[str, tuple[Iterable[int], int]],
+    solid: dict[str, int],
+    workers: int = 2,
+    geometry: str = "default",
+    log=print,
+) -> dict[str, list[Scene]]:
+    """Record, per split, scenes from its seed range until ``want`` succeeded on the wood board;
+    then the first ``solid[split]`` of those again on the solid board.  Returns the recorded
+    (ok) scenes per split and board, in seed order."""
+    out: dict[str, list[Scene]] = {}
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        for split, (seeds, want) in splits.items():
+            ok = _record_split(pool, split, seeds, want, geometry, log)
+            out[f"{split}/wood"] = ok
+            sol = [Scene(split, s.seed, "solid", geometry) for s in ok[: solid.get(split, 0)]]
+            futs = {pool.submit(record_scene, s): s for s in sol if s.status() == "todo"}
+            for fut in futs:
+                _, st, secs = fut.result()
+                log(f"  {futs[fut].name}: {st} ({secs:.0f} s CPU)")
+            out[f"{split}/solid"] = [s for s in sol if s.status() == "ok"]
+    return out
+
+
+def recorded(split: str, board: str, geometry: str = "default") -> list[Scene]:
+    """The scenes of ``split`` recorded so far (ok), in seed order."""
+    root = CACHE / TAG
+    out = []
+    for p in sorted(root.glob(f"{split}-*-{board}-{geometry}")):
+        if p.is_dir():
+            sc = Scene(split, int(p.name.split("-")[1]), board, geometry)
+            if sc.status() == "ok":
+                out.append(sc)
+    return sorted(out, key=lambda s: s.seed)
