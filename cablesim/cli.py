@@ -23,6 +23,8 @@ SUBCOMMANDS: dict[str, str] = {
     "calibrate": "eye-to-hand camera calibration with a ChArUco board in the gripper",
     "view": "write a rerun recording (.rrd) of a recording or run folder, or open one",
     "segment": "run perception on a recorded interaction (any layout): votes, masks, scores",
+    "benchmark": "the thesis's tables in simulation: tuned on validation scenes, scored on test",
+    "dataset": "write simulated sequences in the published layouts (MovingCables, mcor)",
 }
 
 

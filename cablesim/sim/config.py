@@ -82,6 +82,11 @@ class HoseConfig:
     )
     color_jitter: float = 0.06
     friction: float = 0.9
+    # cross-section of the rod: "circle" of ``radius`` (default), or "box" of half-sizes
+    # ``section_size`` (a flat ribbon), which MuJoCo draws in the rod's material frame, so its
+    # twist shows in the image (the twist check of the ground-truth flow uses one)
+    section: str = "circle"
+    section_size: tuple[float, float] = (0.0075, 0.0075)
 
     def validate(self) -> None:
         if not isinstance(self.count, int) or not 1 <= self.count <= 8:
@@ -104,6 +109,19 @@ class HoseConfig:
             raise ConfigError("hoses.both_ends_probability", "must be in [0, 1]")
         if not self.colors:
             raise ConfigError("hoses.colors", "need at least one colour")
+        if self.section not in ("circle", "box"):
+            raise ConfigError("hoses.section", f"must be 'circle' or 'box', got {self.section!r}")
+        if self.section == "box":
+            if len(self.section_size) != 2 or min(self.section_size) <= 0:
+                raise ConfigError(
+                    "hoses.section_size", f"need two positive half-sizes, got {self.section_size}"
+                )
+            if abs(min(self.section_size) - self.radius) > 1e-12:
+                raise ConfigError(
+                    "hoses.section_size",
+                    f"the smaller half-size {min(self.section_size)} must equal hoses.radius "
+                    f"{self.radius} (MuJoCo collides a box rod as a capsule of that radius)",
+                )
 
 
 @dataclass
@@ -176,6 +194,26 @@ class RobotConfig:
 
 
 @dataclass
+class LightConfig:
+    """Lighting: the camera's headlight and a directional key light.  ``jitter`` > 0 draws,
+    from the seed's ``lighting`` stream, a brightness factor in [1 - jitter, 1 + jitter] for
+    each light and turns the key light by up to ``jitter`` radians (randomised datasets); 0
+    keeps the fixed lighting."""
+
+    ambient: float = 0.35  # headlight
+    diffuse: float = 0.35  # headlight
+    key: float = 0.55  # directional key light (diffuse)
+    jitter: float = 0.0
+
+    def validate(self) -> None:
+        for name in ("ambient", "diffuse", "key"):
+            check_positive(f"light.{name}", getattr(self, name), allow_zero=True)
+        check_positive("light.jitter", self.jitter, allow_zero=True)
+        if self.jitter >= 1:
+            raise ConfigError("light.jitter", f"must be < 1, got {self.jitter}")
+
+
+@dataclass
 class PhysicsConfig:
     timestep: float = 0.004
     settle_speed: float = 0.001  # m/s: settled when every hose vertex is slower than this
@@ -202,6 +240,7 @@ class SceneConfig(Config):
     camera: CameraConfig = field(default_factory=CameraConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    light: LightConfig = field(default_factory=LightConfig)
 
     def validate(self) -> SceneConfig:
         if not isinstance(self.seed, int) or self.seed < 0:
@@ -211,6 +250,7 @@ class SceneConfig(Config):
         self.camera.validate()
         self.robot.validate()
         self.physics.validate()
+        self.light.validate()
         if self.hoses.count > len(self.board.connectors):
             raise ConfigError(
                 "hoses.count",
