@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from cablesim.config import Config, to_dict
 from cablesim.errors import ConfigError
@@ -176,7 +177,7 @@ class ThesisConfig(Config):
                     "periods": self.clip_periods,
                     "flows": list(self.clip_flows),
                     "taus": [float(t) for t in self.clip_taus],
-                    "dataset": f"{self.out}/movingcables",
+                    "dataset": str(Path(self.out).resolve() / "movingcables"),
                 }
                 jobs.append(Job("thesis.clip", f"clip-{_digest(params)}-s{seed:06d}", params))
         return jobs

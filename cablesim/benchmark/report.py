@@ -148,9 +148,7 @@ def _params_text(p: dict[str, float] | None) -> str:
 
 def segmentation_markdown(rows: list[dict[str, Any]]) -> list[str]:
     lines: list[str] = []
-    keys = sorted(
-        {(r["flow"], r["perturb"], r["n"]) for r in rows}, key=lambda k: (k[0], not k[1], k[2])
-    )
+    keys = list(dict.fromkeys((r["flow"], r["perturb"], r["n"]) for r in rows))
     for flow, p, n in keys:
         sel = [r for r in rows if (r["flow"], r["perturb"], r["n"]) == (flow, p, n)]
         table = "6.4" if n == 1 else "6.5"

@@ -51,7 +51,7 @@ def _scores(pred: np.ndarray, truth: np.ndarray) -> dict[str, float | None]:
 # --------------------------------------------------------------------------- stream cache
 def cache_root() -> Path:
     base = os.environ.get("CABLESIM_CACHE", Path.home() / ".cache" / "cablesim")
-    return Path(base) / "streams"
+    return Path(base) / "thesis-streams"
 
 
 def _code_digest() -> str:

@@ -55,7 +55,7 @@ def dataset_jobs(
         params = {
             "seed": seed,
             "split": split,
-            "root": str(root),
+            "root": str(Path(root).resolve()),  # worker processes (Ray) have their own cwd
             "scene": scene,
             "randomize": True,
             "periods": periods if periods is not None else (1 if layout == "movingcables" else 3),

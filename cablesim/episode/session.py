@@ -97,6 +97,11 @@ class Session:
         self.robot.stop()
 
     def close(self) -> None:
+        masker = getattr(self, "_arm_masker", None)
+        if masker is not None:  # its renderer lives on its own GL thread
+            masker.close()
+            self._arm_masker = None
+            self._arm_masker_key = None
         self.camera.close()
 
     def __enter__(self) -> Session:
