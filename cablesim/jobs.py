@@ -144,16 +144,23 @@ class Summary:
     failures: dict[str, list[str]] = field(default_factory=dict)  # outcome -> keys
     wall_s: float = 0.0
     backend: str = "local"
+    missing: int = 0  # jobs without a result file left unrun (``dry``)
 
     @property
     def ok(self) -> int:
         return self.outcomes.get("ok", 0)
 
+    @property
+    def failed(self) -> int:
+        return self.total - self.missing - self.ok
+
     def report(self) -> str:
         lines = [
             f"{self.total} jobs ({self.backend}): {self.ran} run now, {self.skipped} already "
-            f"done; {self.ok} ok, {self.total - self.ok} failed; {self.wall_s:.0f} s"
+            f"done; {self.ok} ok, {self.failed} failed; {self.wall_s:.0f} s"
         ]
+        if self.missing:
+            lines[0] += f"; {self.missing} not run"
         for outcome, keys in sorted(self.failures.items()):
             shown = ", ".join(keys[:5]) + (f", ... ({len(keys)})" if len(keys) > 5 else "")
             lines.append(f"  failed [{outcome}]: {shown}")
@@ -275,8 +282,10 @@ def execute(
     progress: bool = True,
     desc: str = "jobs",
     retry_failed: bool = False,
+    dry: bool = False,
 ) -> Summary:
-    """Run the jobs that have no result file in ``out_dir`` yet (module docstring)."""
+    """Run the jobs that have no result file in ``out_dir`` yet (module docstring); with
+    ``dry`` run nothing and only count what is there (``Summary.missing`` jobs have no file)."""
     jobs = _check(list(jobs))
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
         raise ConfigError("workers", f"must be a non-negative integer, got {workers!r}")
@@ -297,13 +306,19 @@ def execute(
         else:
             count(rec)
     skipped = len(jobs) - len(pending)
+    missing = len(pending) if dry else 0
+    if dry:
+        pending = []
     bar = _bar(len(pending), desc, progress and bool(pending))
+
+    new_failures = [0]
 
     def done(rec: dict[str, Any]) -> None:
         write_result(out, rec)
         count(rec)
+        new_failures[0] += rec["status"] != "ok"
         bar.update(1)
-        bar.set_postfix(failed=sum(len(v) for v in failures.values()), refresh=False)
+        bar.set_postfix(failed=new_failures[0], refresh=False)
 
     backend = "local" if ray is None else f"ray ({ray})"
     try:
@@ -322,6 +337,7 @@ def execute(
         {k: sorted(v) for k, v in failures.items()},
         time.perf_counter() - t0,
         backend,
+        missing,
     )
 
 

@@ -23,7 +23,7 @@ CLIP_SEEDS = (402, 403)  # seeds whose tiny randomised scene gives a clip
 
 
 def _jobs(layout: str, seeds: tuple[int, ...], root: Path, split: str = "test") -> list[Job]:
-    jobs = dataset_jobs(layout, seeds[0], seeds[-1] + 1, root, split, TINY)
+    jobs = dataset_jobs(layout, seeds[0], seeds[-1] + 1, root, split, TINY, periods=1)
     return [
         Job(j.kind, j.key, {**j.params, "randomize": FEW_HOSES})
         for j in jobs

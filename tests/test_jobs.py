@@ -44,6 +44,9 @@ def test_local_pool_and_in_process_write_the_same_files(tmp_path):
 
 
 def test_resume_skips_finished_jobs_and_reruns_damaged_ones(tmp_path):
+    dry = execute(_echo_jobs(), tmp_path, workers=1, progress=False, dry=True)
+    assert (dry.ran, dry.missing, dry.ok, dry.failed) == (0, 4, 0, 0)
+    assert "4 not run" in dry.report() and not list(tmp_path.glob("*.json"))
     execute(_echo_jobs(), tmp_path, workers=1, progress=False)
     before = (tmp_path / "a.json").stat().st_mtime_ns
     (tmp_path / "b.json").write_text("{not json")  # a file cut short by a crash

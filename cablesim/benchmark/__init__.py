@@ -56,10 +56,15 @@ def explore_thresholds(cfg: ThesisConfig, rows: list[dict[str, Any]]) -> tuple[f
 
 
 def run_thesis(
-    cfg: ThesisConfig, progress: bool = True, say: Say | None = None, retry_failed: bool = False
+    cfg: ThesisConfig,
+    progress: bool = True,
+    say: Say | None = None,
+    retry_failed: bool = False,
+    report_only: bool = False,
 ) -> dict[str, Any]:
     """Run (or resume) the benchmark of ``cfg`` and write its report to ``cfg.out``
-    (``retry_failed``: run the jobs whose recorded outcome is a failure again)."""
+    (``retry_failed``: run the jobs whose recorded outcome is a failure again;
+    ``report_only``: run nothing, report from the result files there are)."""
     cfg.validate()
     say = say or Progress("benchmark", progress)
     out = Path(cfg.out)
@@ -73,7 +78,7 @@ def run_thesis(
         jobs = cfg.interaction_jobs()
         say(f"interactions: {len(jobs)} jobs ({cfg.workers} workers, ray {cfg.ray})")
         summaries["interactions"] = execute(
-            jobs, results, cfg.workers, cfg.ray, progress, "interactions", retry_failed
+            jobs, results, cfg.workers, cfg.ray, progress, "interactions", retry_failed, report_only
         )
         say(summaries["interactions"].report())
         records = load_results(results, jobs)
@@ -92,7 +97,14 @@ def run_thesis(
             jobs2 = cfg.exploration_jobs(c0, r2)
             say(f"explorations: {len(jobs2)} jobs (c0 {c0:g}, R2 {r2:g}: {source})")
             summaries["explorations"] = execute(
-                jobs2, results, cfg.workers, cfg.ray, progress, "explorations", retry_failed
+                jobs2,
+                results,
+                cfg.workers,
+                cfg.ray,
+                progress,
+                "explorations",
+                retry_failed,
+                report_only,
             )
             say(summaries["explorations"].report())
             explore_records = load_results(results, jobs2)
@@ -101,7 +113,7 @@ def run_thesis(
             jobs3 = cfg.clip_jobs()
             say(f"clips: {len(jobs3)} jobs")
             summaries["clips"] = execute(
-                jobs3, results, cfg.workers, cfg.ray, progress, "clips", retry_failed
+                jobs3, results, cfg.workers, cfg.ray, progress, "clips", retry_failed, report_only
             )
             say(summaries["clips"].report())
             doc["clips"] = rp.clip_table(load_results(results, jobs3), cfg.clip_flows)
@@ -112,6 +124,7 @@ def run_thesis(
         k: {
             "total": s.total,
             "ok": s.ok,
+            "not_run": s.missing,
             "failures": s.failures,
             "outcomes": dict(s.outcomes),
         }
@@ -155,7 +168,8 @@ def write_report(
     ]
     for k, s in doc["jobs"].items():
         fails = ", ".join(f"{o} {len(v)}" for o, v in sorted(s["failures"].items())) or "none"
-        lines.append(f"- {k}: {s['ok']} of {s['total']} ok; failed: {fails}")
+        extra = f"; {s['not_run']} not run" if s["not_run"] else ""
+        lines.append(f"- {k}: {s['ok']} of {s['total']} ok; failed: {fails}{extra}")
     lines += ["", "## Motion segmentation, ablation and correlation (tables 6.3-6.5)", ""]
     lines += rp.segmentation_markdown(rows)
     lines += rp.thesis_thresholds_markdown(doc["thesis_thresholds"])
