@@ -26,6 +26,8 @@ SUBCOMMANDS: dict[str, str] = {
     "view": "write a rerun recording (.rrd) of a recording or run folder, or open one",
     "segment": "run perception on a recorded interaction (any layout): votes, masks, scores",
     "twin": "the real-robot path with no hardware: franka-sim + a digital twin + RealSense",
+    "benchmark": "the thesis's tables in simulation: tuned on validation scenes, scored on test",
+    "dataset": "write simulated sequences in the published layouts (MovingCables, mcor)",
 }
 
 

@@ -29,6 +29,8 @@ STREAMS: tuple[str, ...] = (
     "scene_resample",  # documented re-draws of a scene that does not meet its guarantees
     "grasp_retry",  # neighbouring points tried when a grasp does not hold
     "calibration",  # the board poses drawn by ``cablesim calibrate``
+    "lighting",  # light jitter (LightConfig.jitter)
+    "dataset",  # a dataset scene's randomised background, hoses, light and camera
 )
 
 

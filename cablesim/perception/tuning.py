@@ -217,3 +217,103 @@ def tuning_table(results: Sequence[TuningResult]) -> str:
                 f"{row.precision:.3f} | {row.f_beta:.3f} | {row.iou:.3f} |"
             )
     return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------ counts, for parallel runs
+@dataclass
+class ThresholdCounts:
+    """Confusion counts of one sequence over a threshold grid (mask = score > inner, for each
+    outer value), enough to tune and score any threshold of the grid later, on another
+    machine: ``tp``/``fp`` have shape (len(outer), len(inner)); ``npos`` truth pixels."""
+
+    method: str
+    n: int
+    outer_name: str | None  # "c0_min" for correlation, else None
+    outer: np.ndarray
+    inner_name: str
+    inner: np.ndarray
+    tp: np.ndarray
+    fp: np.ndarray
+    npos: int
+
+    def to_dict(self) -> dict:
+        return {
+            "method": self.method,
+            "n": self.n,
+            "outer_name": self.outer_name,
+            "outer": [float(x) for x in self.outer],
+            "inner_name": self.inner_name,
+            "inner": [float(x) for x in self.inner],
+            "tp": self.tp.astype(np.int64).tolist(),
+            "fp": self.fp.astype(np.int64).tolist(),
+            "npos": int(self.npos),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> ThresholdCounts:
+        return cls(
+            d["method"],
+            int(d["n"]),
+            d["outer_name"],
+            np.asarray(d["outer"], float),
+            d["inner_name"],
+            np.asarray(d["inner"], float),
+            np.asarray(d["tp"], np.float64),
+            np.asarray(d["fp"], np.float64),
+            int(d["npos"]),
+        )
+
+    def scores(self, beta: float) -> tuple[np.ndarray, ...]:
+        """Precision, recall, IoU and F_beta per grid cell (NaN where undefined)."""
+        p, r, iou = _prf(self.tp, self.fp, self.npos)
+        return p, r, iou, _f_beta_counts(self.tp, self.fp, self.npos, beta)
+
+    def params(self, i: int, j: int) -> dict[str, float]:
+        out = {self.inner_name: float(self.inner[j])}
+        if self.outer_name is not None:
+            out[self.outer_name] = float(self.outer[i])
+        return out
+
+
+def threshold_counts(
+    stats: StreamStatistics,
+    truth: np.ndarray,
+    method: str = "correlation",
+    n: int = 1,
+    grid: dict[str, np.ndarray] | None = None,
+) -> ThresholdCounts:
+    """:class:`ThresholdCounts` of one sequence (the grid of :data:`DEFAULT_GRIDS`)."""
+    if method not in DEFAULT_GRIDS:
+        raise InputError(f"unknown method {method!r}")
+    grid = {**DEFAULT_GRIDS[method], **(grid or {})}
+    t = as_mask(truth, stats.shape, name="truth")
+    if method == "correlation":
+        outer_name, outer = "c0_min", np.asarray(grid["c0_min"], float)
+        inner_name, inner = "r2_min", np.asarray(grid["r2_min"], float)
+    else:
+        outer_name, outer = None, np.array([np.nan])
+        inner_name = "tau_v" if method == "segmentation" else "std_min"
+        inner = np.asarray(grid[inner_name], float)
+    tp = np.zeros((len(outer), len(inner)))
+    fp = np.zeros_like(tp)
+    npos = int(t.sum())
+    for i, c in enumerate(outer):
+        score = _scores_for(stats, method, n, None if np.isnan(c) else c)
+        tp[i], fp[i], npos = _counts_for_thresholds(score, t, inner)
+    return ThresholdCounts(method, n, outer_name, outer, inner_name, inner, tp, fp, npos)
+
+
+def tune_counts(counts: Sequence[ThresholdCounts], beta: float) -> tuple[int, int, float]:
+    """The grid cell (i, j) maximising the mean F_beta over sequences (NaNs left out, as
+    :func:`tune_thresholds`), and that mean."""
+    if not counts:
+        raise InputError("tune_counts needs the counts of at least one sequence")
+    acc = _NanMean(counts[0].tp.shape)
+    for c in counts:
+        if c.tp.shape != acc.sum.shape:
+            raise InputError("the sequences' counts were computed on different grids")
+        acc.sum += np.nan_to_num(c.scores(beta)[3], nan=0.0)
+        acc.count += ~np.isnan(c.scores(beta)[3])
+    fb = np.nan_to_num(acc.mean, nan=-1.0)
+    i, j = np.unravel_index(np.argmax(fb), fb.shape)
+    return int(i), int(j), float(acc.mean[i, j])

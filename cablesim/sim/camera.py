@@ -107,6 +107,9 @@ class SimSnapshot:
     body_pos: np.ndarray  # (nbody, 3)
     body_mat: np.ndarray  # (nbody, 3, 3)
     meta: dict[str, Any] = field(default_factory=dict)
+    # per hose (V - 1, 3, 3) material frames of the edges (columns: tangent, m1, m2) from
+    # MuJoCo's rod state, or None where it has none (see SimCamera._material_frames)
+    hose_frames: tuple[np.ndarray | None, ...] = ()
 
     @property
     def rgb(self) -> np.ndarray:
@@ -261,7 +264,34 @@ class SimCamera(Camera):
             body_pos=d.xpos.copy(),
             body_mat=d.xmat.reshape(-1, 3, 3).copy(),
             meta=dict(meta),
+            hose_frames=tuple(
+                self._material_frames(h, v, t)
+                for h, v, t in zip(self.world.hoses, verts, twist, strict=True)
+            ),
         )
+
+    def _material_frames(self, hose: Any, verts: np.ndarray, twist: np.ndarray) -> Any:
+        """(E, 3, 3) material frames of a hose's edges (columns: tangent, m1, m2): MuJoCo's
+        time-parallel reference frame of each edge (``u_old`` in ``data.plastic``) turned by
+        the edge's twist angle right-handedly about the tangent (vertex k -> k + 1), the
+        convention MuJoCo draws box-section rods with (tests/sim/test_flow_gt_twist.py).  None
+        when the rod has no such state or it is stale (vertices moved without a physics step:
+        the stored tangents differ from the current ones)."""
+        m, d = self.world.model, self.world.data
+        n = len(verts) - 1
+        adr = int(m.flex_plasticadr[hose.flex_id])
+        if adr < 0 or len(twist) != n or adr + 6 * n > d.plastic.shape[0]:
+            return None
+        ref = d.plastic[adr : adr + 6 * n].reshape(n, 6)
+        t = verts[1:] - verts[:-1]
+        t /= np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-18)
+        u = ref[:, 3:] - np.einsum("ij,ij->i", ref[:, 3:], t)[:, None] * t
+        norm = np.linalg.norm(u, axis=1)
+        if np.any(np.abs(np.einsum("ij,ij->i", ref[:, :3], t)) < 1 - 1e-9) or np.any(norm < 0.5):
+            return None
+        u /= norm[:, None]
+        m1 = np.cos(twist)[:, None] * u + np.sin(twist)[:, None] * np.cross(t, u)
+        return np.stack([t, m1, np.cross(t, m1)], axis=2)
 
     # ------------------------------------------------------------------ internals
     def _twist_addresses(self, hose: Any) -> np.ndarray:

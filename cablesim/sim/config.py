@@ -126,6 +126,11 @@ class HoseConfig:
     )
     color_jitter: float = 0.06
     friction: float = 0.9
+    # cross-section of the rod: "circle" of ``radius`` (default), or "box" of half-sizes
+    # ``section_size`` (a flat ribbon), which MuJoCo draws in the rod's material frame, so its
+    # twist shows in the image (the twist check of the ground-truth flow uses one)
+    section: str = "circle"
+    section_size: tuple[float, float] = (0.0075, 0.0075)
 
     def validate(self) -> None:
         check_fields(self, "hoses.")
@@ -168,6 +173,19 @@ class HoseConfig:
                 check_number(f"hoses.colors[{i}][{k}]", v, 0.0, 1.0)
         check_number("hoses.color_jitter", self.color_jitter, 0.0, 1.0)
         check_positive("hoses.friction", self.friction, allow_zero=True)
+        if self.section not in ("circle", "box"):
+            raise ConfigError("hoses.section", f"must be 'circle' or 'box', got {self.section!r}")
+        if self.section == "box":
+            if len(self.section_size) != 2 or min(self.section_size) <= 0:
+                raise ConfigError(
+                    "hoses.section_size", f"need two positive half-sizes, got {self.section_size}"
+                )
+            if abs(min(self.section_size) - self.radius) > 1e-12:
+                raise ConfigError(
+                    "hoses.section_size",
+                    f"the smaller half-size {min(self.section_size)} must equal hoses.radius "
+                    f"{self.radius} (MuJoCo collides a box rod as a capsule of that radius)",
+                )
 
 
 @dataclass
@@ -381,6 +399,27 @@ class RobotConfig:
         check_visual(self.visual, "robot.visual")
 
 
+@dataclass
+class LightConfig:
+    """Lighting: the camera's headlight and a directional key light.  ``jitter`` > 0 draws,
+    from the seed's ``lighting`` stream, a brightness factor in [1 - jitter, 1 + jitter] for
+    each light and turns the key light by up to ``jitter`` radians (randomised datasets); 0
+    keeps the fixed lighting."""
+
+    ambient: float = 0.35  # headlight
+    diffuse: float = 0.35  # headlight
+    key: float = 0.55  # directional key light (diffuse)
+    jitter: float = 0.0
+
+    def validate(self) -> None:
+        check_fields(self, "light.")
+        for name in ("ambient", "diffuse", "key"):
+            check_positive(f"light.{name}", getattr(self, name), allow_zero=True)
+        check_positive("light.jitter", self.jitter, allow_zero=True)
+        if self.jitter >= 1:
+            raise ConfigError("light.jitter", f"must be < 1, got {self.jitter}")
+
+
 SOLVERS = ("Newton", "CG")
 
 
@@ -436,6 +475,7 @@ class SceneConfig(Config):
     camera: CameraConfig = field(default_factory=CameraConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    light: LightConfig = field(default_factory=LightConfig)
 
     def validate(self) -> SceneConfig:
         check_fields(self)
@@ -448,6 +488,7 @@ class SceneConfig(Config):
         self.camera.validate()
         self.robot.validate()
         self.physics.validate()
+        self.light.validate()
         if self.hoses.count > len(self.board.connectors):
             raise ConfigError(
                 "hoses.count",

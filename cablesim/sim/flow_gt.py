@@ -53,6 +53,7 @@ class RodGeometry:
     twist: np.ndarray  # (E,)
     edge_start: np.ndarray  # (H + 1,)
     verts: tuple[np.ndarray, ...]
+    frames: tuple[np.ndarray | None, ...] = ()  # per hose (E, 3, 3) material frames or None
 
     @staticmethod
     def from_snapshot(snap: SimSnapshot) -> RodGeometry:
@@ -71,6 +72,7 @@ class RodGeometry:
             np.concatenate(tw),
             np.array(start, np.int64),
             tuple(np.asarray(v, float) for v in snap.hose_vertices),
+            tuple(getattr(snap, "hose_frames", ())) or (None,) * len(snap.hose_vertices),
         )
 
     def nearest_edges(self, points: np.ndarray, hose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -152,8 +154,10 @@ def edge_rotations(
     dst tangent; where the neighbourhood is straight in either frame the roll about the
     tangent cannot be seen from the centreline and the smallest rotation is used.  The twist
     part rotates about the dst tangent by the change of the edge's twist angle (a positive
-    angle turns right-handedly about the vertex k -> k+1 direction).  Only ``hoses`` (all by
-    default) are computed; the other edges get the identity."""
+    angle turns right-handedly about the vertex k -> k+1 direction).  Where both snapshots
+    carry MuJoCo's material frames of the hose (``RodGeometry.frames``, after physics steps),
+    the rotation is exactly the one between them instead.  Only ``hoses`` (all by default)
+    are computed; the other edges get the identity."""
     n = len(src.a)
     R = np.tile(np.eye(3), (n, 1, 1))
     sel = range(len(src.verts)) if hoses is None else [int(x) for x in hoses]
@@ -166,6 +170,12 @@ def edge_rotations(
         vs, vd = src.verts[h], dst.verts[h]
         if vs.shape != vd.shape:
             raise InputError("the two snapshots have hoses with different vertex counts")
+        fs = src.frames[h] if h < len(src.frames) else None
+        fd = dst.frames[h] if h < len(dst.frames) else None
+        if fs is not None and fd is not None:
+            sl = slice(src.edge_start[h], src.edge_start[h + 1])
+            R[sl] = np.einsum("nij,nkj->nik", fd, fs)  # F_dst F_src^T
+            continue
         n_e = len(vs) - 1
         k = np.arange(n_e)
         v0 = int(src.edge_start[h]) + h  # first vertex of hose h in the concatenation

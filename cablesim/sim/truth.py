@@ -131,6 +131,10 @@ class SimTruth:
         self.log = MotionLog()
         self._pending: dict[int, Any] = {}  # id(image) -> snapshot, until frame_truth
         self._snaps: list[Any] = []  # snapshots of the frames, in order
+        # keep the snapshots of the last interaction's frames in ``kept`` (flow between any
+        # two of its frames afterwards, e.g. back to the first one for MovingCables clips)
+        self.keep_snapshots = False
+        self.kept: list[Any] = []
 
     # ---- the clock's grabber ------------------------------------------------------------
     def capture(self) -> CameraImage:
@@ -177,6 +181,7 @@ class SimTruth:
         from cablesim.sim.flow_gt import flow_to_target
 
         spent = 0.0
+        self.kept = list(self._snaps) if self.keep_snapshots else []
         if not frames or not frames[-1].is_target or len(self._snaps) != len(frames):
             return spent
         target_snap = self._snaps[-1]

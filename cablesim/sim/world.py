@@ -28,6 +28,7 @@ import mujoco
 import numpy as np
 
 from cablesim.errors import PhysicsDivergedError
+from cablesim.seeding import stream
 from cablesim.sim import assets
 from cablesim.sim.config import SceneConfig
 from cablesim.sim.layout import (
@@ -84,6 +85,36 @@ def _fmt(v) -> str:
     return " ".join(f"{float(x):.9g}" for x in np.ravel(v))
 
 
+KEY_LIGHT_DIR = (0.45, 0.2, -0.87)
+
+
+def _lighting(cfg: SceneConfig) -> dict[str, str]:
+    """Headlight and key light of the scene (``LightConfig``; jittered from the seed's
+    ``lighting`` stream when ``jitter`` > 0)."""
+    li = cfg.light
+    gains, direction = np.ones(3), np.array(KEY_LIGHT_DIR)
+    if li.jitter > 0:
+        rng = stream(cfg.seed, "lighting")
+        gains = rng.uniform(1 - li.jitter, 1 + li.jitter, 3)
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        angle = rng.uniform(-li.jitter, li.jitter)
+        # Rodrigues: turn the key light's direction about a random axis
+        d = direction
+        direction = (
+            d * math.cos(angle)
+            + np.cross(axis, d) * math.sin(angle)
+            + axis * (axis @ d) * (1 - math.cos(angle))
+        )
+    ambient, diffuse, key = (li.ambient, li.diffuse, li.key) * gains
+    return {
+        "ambient": _fmt([ambient] * 3),
+        "diffuse": _fmt([diffuse] * 3),
+        "key": _fmt([key] * 3),
+        "dir": _fmt(direction),
+    }
+
+
 def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     b, h = cfg.board, cfg.hoses
     R = look_at_frame(cam.position, cam.look_at)
@@ -100,6 +131,10 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
             f'<geom name="connector{i}" type="mesh" mesh="male" pos="{b.x:.6g} {y:.6g} {z:.6g}" '
             f'quat="0 0.70710678 0 0.70710678" material="brass" contype="0" conaffinity="0"/>'
         )
+    section = ""
+    if h.section == "box":
+        section = f' section="box" sectionsize="{_fmt(h.section_size)}"'
+    light = _lighting(cfg)
     couplings, flexes, equalities = [], [], []
     for s in hoses:
         for k, c in enumerate(s.ends):
@@ -121,7 +156,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
               pos="{_fmt(centre)}" quat="0.70710678 0 0.70710678 0" dim="1" dof="full"
               radius="{h.radius}" rgba="{_fmt(s.rgb)} 1" mass="{mass:.6g}">
       <edge equality="true" solimp="0.99 0.999 0.001" solref="0.004 1" damping="0"/>
-      <elasticity young="{s.young:.6g}" poisson="{h.poisson}" damping="0.0005"/>
+      <elasticity young="{s.young:.6g}" poisson="{h.poisson}" damping="0.0005"{section}/>
       <contact condim="3" solref="0.01 1" solimp="0.95 0.99 0.001" friction="{h.friction} 0.005 0.0001"
                selfcollide="none"/>
     </flexcomp>""")
@@ -146,7 +181,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     <global offwidth="{max(1280, cfg.camera.width)}" offheight="{max(720, cfg.camera.height)}"/>
     <quality shadowsize="0"/>
     <map znear="{cfg.camera.near / 5:.6g}" zfar="{cfg.camera.far / 5:.6g}"/>
-    <headlight ambient="0.35 0.35 0.35" diffuse="0.35 0.35 0.35" specular="0.05 0.05 0.05"/>
+    <headlight ambient="{light["ambient"]}" diffuse="{light["diffuse"]}" specular="0.05 0.05 0.05"/>
   </visual>
   <default>
     <geom solref="0.01 1"/>
@@ -165,8 +200,8 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     {board_mat}
   </asset>
   <worldbody>
-    <light name="key" pos="-0.6 -0.4 2.2" dir="0.45 0.2 -0.87" directional="true" castshadow="false"
-           diffuse="0.55 0.55 0.55" specular="0.1 0.1 0.1"/>
+    <light name="key" pos="-0.6 -0.4 2.2" dir="{light["dir"]}" directional="true" castshadow="false"
+           diffuse="{light["key"]}" specular="0.1 0.1 0.1"/>
     <geom name="floor" type="plane" size="3 3 0.1" pos="0 0 -0.75" material="floor" contype="0" conaffinity="0"/>
     <geom name="table" type="box" size="0.75 0.85 0.02" pos="0.15 0 -0.02" material="table" friction="0.8"/>
     <geom name="board" type="box" size="{b.thickness / 2:.6g} {b.width / 2:.6g} {b.height / 2:.6g}"

@@ -174,3 +174,25 @@ def test_tuning_matches_brute_force(validation):
     assert res.rows[1.0].f_beta == pytest.approx(best)
     with pytest.raises(InputError, match="truths"):
         tune_thresholds(stats, truths[:1], "segmentation")
+
+
+@pytest.mark.parametrize("method", ["correlation", "segmentation", "ablation"])
+def test_counts_tune_as_tune_thresholds(validation, method):
+    """Counts per sequence (what parallel jobs store) tune and score exactly as
+    :func:`tune_thresholds` on the statistics, also after a JSON round trip."""
+    from cablesim.perception.tuning import ThresholdCounts, threshold_counts, tune_counts
+
+    stats = [v[0] for v in validation]
+    truths = [v[1] for v in validation]
+    for n in (1, 2):
+        ref = tune_thresholds(stats, truths, method, betas=(1.0, 0.4), n=n)
+        counts = [
+            ThresholdCounts.from_dict(threshold_counts(s, t, method, n).to_dict())
+            for s, t in zip(stats, truths, strict=True)
+        ]
+        for beta in (1.0, 0.4):
+            i, j, f = tune_counts(counts, beta)
+            assert counts[0].params(i, j) == ref.rows[beta].params
+            assert f == pytest.approx(ref.rows[beta].f_beta)
+            p = np.nanmean([c.scores(beta)[0][i, j] for c in counts])
+            assert p == pytest.approx(ref.rows[beta].precision)

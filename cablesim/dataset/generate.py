@@ -1,0 +1,263 @@
+"""Simulated sequences in the published layouts (SPEC section 8), one scene per job.
+
+- :func:`simulate_clip` / :func:`run_movingcables`: a MovingCables clip: one hose of a
+  randomised scene moved by the gripper while every other hose stays exactly still
+  (:class:`~cablesim.sim.freeze.HoseFreeze`); every frame at the camera's 15 frames/s (odd
+  image numbers from 00000001), flow of each image back to the first one with instance ids,
+  normal flow, and the arm as the "stick" (robot pixels dilated by 2 px, as the thesis dilates
+  the poking stick).  Flow is given on hose pixels and zero elsewhere, as in the published
+  ground truth.
+- :func:`run_mcor`: a motion-correlation robot sequence (grasp, two actions, target frame) in
+  the published layout, with its ground-truth mask under ``motion_correlation_annotations``.
+
+Everything a sequence holds follows from its seed (scene, hose, start segment), so a sequence
+is the same bytes whatever the number of workers that wrote the dataset.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from cablesim.errors import CablesimError, InputError
+from cablesim.sim.config import SceneConfig
+
+STICK_DILATION = 2  # px, as the thesis dilates the poking stick's mask
+SEQUENCE_EPOCH = dt.datetime(2030, 1, 1)  # sequence names: epoch + seed minutes
+
+
+def outcome_of(reason: str) -> str:
+    """A short named outcome from an interaction's failure reason (``"grasp: ..."`` ->
+    ``"grasp"``); a result's own ``outcome`` is used when it has one."""
+    head = reason.split(":")[0].split("(")[0].strip().lower()
+    slug = "".join(c if c.isalnum() else "_" for c in head).strip("_")
+    return (slug or "failed")[:40]
+
+
+def scene_from(params: dict[str, Any]) -> SceneConfig:
+    """The scene of a job: randomised from the seed (datasets) or the default scene, at the
+    job's image size and hose count."""
+    from cablesim.dataset.randomize import Randomization, randomize_scene
+
+    size = params.get("scene", {})
+    base = SceneConfig(seed=int(params["seed"]))
+    base.camera.width = int(size.get("width", base.camera.width))
+    base.camera.height = int(size.get("height", base.camera.height))
+    if "hoses" in size:
+        base.hoses.count = int(size["hoses"])
+    if params.get("randomize", False):
+        r = params["randomize"]
+        return randomize_scene(base.seed, base, Randomization(**(r if isinstance(r, dict) else {})))
+    return base.validate()
+
+
+def failure(reason: str, outcome: str | None = None, **extra: Any) -> dict[str, Any]:
+    return {
+        "status": "failed",
+        "outcome": outcome or outcome_of(reason),
+        "result": {"reason": reason, **extra},
+    }
+
+
+# --------------------------------------------------------------------------- MovingCables
+@dataclass
+class SimClip:
+    """One simulated single-moving-hose clip (see the module docstring)."""
+
+    seed: int
+    hose: int
+    rgb: list[np.ndarray]
+    flow: list[np.ndarray]  # each image back to the first, hose pixels only
+    normal_flow: list[np.ndarray]
+    instances: list[np.ndarray]  # uint16, hose index + 1 on hose pixels
+    stick: list[np.ndarray]  # bool
+    scene: SceneConfig
+
+
+def simulate_clip(
+    seed: int,
+    scene: SceneConfig,
+    periods: int = 1,
+    directions: tuple[str, ...] = ("along",),
+) -> SimClip | dict[str, Any]:
+    """A :class:`SimClip` of ``scene``, or a failure record (named outcome)."""
+    from cablesim.formats.movingcables import labels_to_instances
+    from cablesim.sim.flow_gt import gt_flow
+    from cablesim.sim.freeze import HoseFreeze
+    from cablesim.sim.session import EpisodeConfig, SimSession
+
+    cfg = EpisodeConfig(seed=seed, scene=scene)
+    cfg.interaction.actions.periods = int(periods)
+    cfg.interaction.actions.directions = tuple(directions)
+    cfg.interaction.capture.min_gripper_step = 0.0  # every frame: a video clip
+    cfg.interaction.retreat.verify = False  # the clip ends with the action: no target frame
+    session = SimSession.build(cfg)
+    try:
+        hose = session.draw_hose()
+        freeze = HoseFreeze(session.world, hose)
+        session.world.after_step.append(freeze)
+        session.truth.keep_snapshots = True
+        try:
+            seg = session.pick_start()
+        except CablesimError as e:
+            return failure(str(e), "no_start_segment")
+        res = session.interact(seg.mask)
+        freeze.release()
+        if not res.success or res.stream is None:
+            return failure(res.reason, getattr(res, "outcome", None), hose=hose)
+        snaps = session.truth.kept
+        frames = res.stream.frames
+        if len(snaps) != len(frames):
+            return failure("ground truth snapshots do not match the frames", "no_truth")
+        idx = [i for i, f in enumerate(frames) if f.action == 0]
+        if len(idx) < 2:
+            return failure(f"only {len(idx)} frames in the action", "too_few_frames")
+        first = snaps[idx[0]]
+        kernel = np.ones((2 * STICK_DILATION + 1,) * 2, np.uint8)
+        clip = SimClip(seed, hose, [], [], [], [], [], scene)
+        for i in idx:
+            s = snaps[i]
+            g = gt_flow(s, first)
+            on_hose = (s.labels >= 0)[..., None]
+            clip.rgb.append(frames[i].rgb)
+            clip.flow.append(np.where(on_hose, g.flow, 0.0).astype(np.float32))
+            clip.normal_flow.append(np.where(on_hose, g.normal_flow, 0.0).astype(np.float32))
+            clip.instances.append(labels_to_instances(s.labels))
+            robot = (s.labels == -2).astype(np.uint8)
+            clip.stick.append(cv2.dilate(robot, kernel) > 0)
+        return clip
+    finally:
+        session.close()
+
+
+def write_sim_clip(split_dir: str | Path, name: str, clip: SimClip) -> int:
+    """Write a clip in the published layout; returns the bytes written."""
+    from cablesim.formats.movingcables import ClipFrame, write_clip
+
+    frames = [
+        ClipFrame(2 * k + 1, rgb, flow, nflow, inst, stick)
+        for k, (rgb, flow, nflow, inst, stick) in enumerate(
+            zip(clip.rgb, clip.flow, clip.normal_flow, clip.instances, clip.stick, strict=True)
+        )
+    ]
+    split_dir = Path(split_dir)
+    write_clip(split_dir, name, frames)
+    total = 0
+    for folder in ("rgb_clips", "flow_first_back", "normal_flow_first_back", "stick_masks"):
+        total += sum(p.stat().st_size for p in (split_dir / folder / name).glob("*.png"))
+    return total
+
+
+def clip_name(index: int) -> str:
+    if not 1 <= index <= 9999:
+        raise InputError(f"clip numbers run from 0001 to 9999, got {index}")
+    return f"{index:04d}"
+
+
+def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
+    """Job: one MovingCables clip (params: seed, clip number, split, root, scene, periods)."""
+    t0 = time.perf_counter()
+    seed = int(params["seed"])
+    scene = scene_from(params)
+    clip = simulate_clip(seed, scene, int(params.get("periods", 1)))
+    if isinstance(clip, dict):
+        return clip
+    t_sim = time.perf_counter() - t0
+    name = clip_name(int(params["clip"]))
+    nbytes = write_sim_clip(Path(params["root"]) / params["split"], name, clip)
+    return {
+        "status": "ok",
+        "outcome": "ok",
+        "result": {
+            "clip": name,
+            "split": params["split"],
+            "seed": seed,
+            "hose": clip.hose,
+            "images": len(clip.rgb),
+            "bytes": nbytes,
+            "hoses": scene.hoses.count,
+            "background": scene.board.background,
+            "moving_pixels_last": int(
+                np.count_nonzero(np.linalg.norm(clip.normal_flow[-1], axis=2) > 1.0)
+            ),
+        },
+        "timings": {"simulate_s": t_sim, "write_s": time.perf_counter() - t0 - t_sim},
+    }
+
+
+# --------------------------------------------------------------------------- motion correlation
+def sequence_name_of(seed: int) -> str:
+    """The published-style folder name of seed ``seed``'s sequence (a fixed epoch plus
+    ``seed`` minutes, so names sort by seed and never depend on when they were made)."""
+    from cablesim.formats.mcor import sequence_name
+
+    return sequence_name(SEQUENCE_EPOCH + dt.timedelta(minutes=int(seed)))
+
+
+def run_mcor(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
+    """Job: one motion-correlation sequence (params: seed, split, root, scene, periods,
+    arm_masks)."""
+    from cablesim.formats.mcor import write_annotation, write_mcor
+    from cablesim.sim.session import EpisodeConfig, SimSession
+
+    t0 = time.perf_counter()
+    seed = int(params["seed"])
+    scene = scene_from(params)
+    cfg = EpisodeConfig(seed=seed, scene=scene)
+    cfg.interaction.actions.periods = int(params.get("periods", 3))
+    cfg.interaction.capture.arm_masks = bool(params.get("arm_masks", True))
+    session = SimSession.build(cfg)
+    try:
+        try:
+            seg = session.pick_start()
+        except CablesimError as e:
+            return failure(str(e), "no_start_segment")
+        res = session.interact(seg.mask)
+        if not res.success or res.stream is None:
+            return failure(res.reason, getattr(res, "outcome", None), hose=session.hose)
+        stream = res.stream
+        root = Path(params["root"])
+        name = sequence_name_of(seed)
+        folder = root / "motion_correlation_buffers" / name
+        masks = [f.arm_mask for f in stream.frames]
+        write_mcor(
+            folder,
+            stream,
+            segment=seg.mask,
+            arm_masks=dict(enumerate(masks)) if all(m is not None for m in masks) else None,
+            base_to_camera=np.linalg.inv(session.T_world_camera) @ session.T_world_base,
+            overwrite=True,
+        )
+        truth = stream.target.truth.labels == session.hose
+        ann = write_annotation(
+            root / "motion_correlation_annotations",
+            params["split"],
+            name,
+            len(stream.frames) - 1,
+            truth,
+        )
+        nbytes = sum(p.stat().st_size for p in folder.iterdir()) + ann.stat().st_size
+        return {
+            "status": "ok",
+            "outcome": "ok",
+            "result": {
+                "sequence": name,
+                "split": params["split"],
+                "seed": seed,
+                "hose": session.hose,
+                "images": len(stream.frames),
+                "bytes": nbytes,
+                "hoses": scene.hoses.count,
+                "background": scene.board.background,
+                "truth_pixels": int(truth.sum()),
+            },
+            "timings": {"total_s": time.perf_counter() - t0},
+        }
+    finally:
+        session.close()

@@ -1,0 +1,70 @@
+"""Randomised scenes for datasets: background, hose count and colours, lighting and camera pose
+drawn from the seed's ``dataset`` stream (so a scene depends on its seed alone).
+
+    scene = randomize_scene(1234, SceneConfig(), Randomization())
+"""
+
+from __future__ import annotations
+
+import colorsys
+import copy
+from dataclasses import dataclass
+
+from cablesim.config import check_positive
+from cablesim.errors import ConfigError
+from cablesim.seeding import stream
+from cablesim.sim.config import BACKGROUNDS, SceneConfig
+
+
+@dataclass
+class Randomization:
+    """What :func:`randomize_scene` draws per scene."""
+
+    backgrounds: tuple[str, ...] = BACKGROUNDS
+    hoses: tuple[int, int] = (2, 6)  # inclusive range of hose counts
+    random_colours: float = 0.5  # share of scenes with random (HSV) hose colours
+    light_jitter: float = 0.3  # LightConfig.jitter
+    camera_position_jitter: float = 0.02  # metres, CameraConfig.position_jitter
+    camera_look_at_jitter: float = 0.03
+
+    def validate(self) -> Randomization:
+        for b in self.backgrounds:
+            if b not in BACKGROUNDS:
+                raise ConfigError("backgrounds", f"unknown {b!r}; choose from {BACKGROUNDS}")
+        if not self.backgrounds:
+            raise ConfigError("backgrounds", "need at least one background")
+        lo, hi = self.hoses
+        if not 1 <= lo <= hi <= 8:
+            raise ConfigError("hoses", f"need 1 <= min <= max <= 8, got {self.hoses}")
+        if not 0 <= self.random_colours <= 1:
+            raise ConfigError("random_colours", f"must be in [0, 1], got {self.random_colours}")
+        check_positive("light_jitter", self.light_jitter, allow_zero=True)
+        check_positive("camera_position_jitter", self.camera_position_jitter, allow_zero=True)
+        check_positive("camera_look_at_jitter", self.camera_look_at_jitter, allow_zero=True)
+        return self
+
+
+def randomize_scene(seed: int, base: SceneConfig, r: Randomization | None = None) -> SceneConfig:
+    """``base`` with the randomised parts of scene ``seed`` (image size, robot and physics
+    stay as in ``base``)."""
+    r = (r or Randomization()).validate()
+    rng = stream(seed, "dataset")
+    cfg = copy.deepcopy(base)
+    cfg.seed = int(seed)
+    cfg.board.background = r.backgrounds[int(rng.integers(len(r.backgrounds)))]
+    cfg.board.solid_rgb = tuple(float(x) for x in rng.uniform(0.2, 0.85, 3))
+    cfg.hoses.count = int(rng.integers(r.hoses[0], r.hoses[1] + 1))
+    if rng.random() < r.random_colours:
+        cfg.hoses.colors = tuple(
+            tuple(
+                float(c)
+                for c in colorsys.hsv_to_rgb(
+                    rng.random(), rng.uniform(0.5, 1), rng.uniform(0.3, 0.95)
+                )
+            )
+            for _ in range(8)
+        )
+    cfg.light.jitter = float(r.light_jitter)
+    cfg.camera.position_jitter = float(r.camera_position_jitter)
+    cfg.camera.look_at_jitter = float(r.camera_look_at_jitter)
+    return cfg.validate()

@@ -1,0 +1,120 @@
+"""``cablesim dataset``: simulated sequences in the published layouts, read back by the
+readers of ``cablesim.formats`` with the published conventions, the same bytes whatever the
+number of workers, one moving hose and nothing else moving in a MovingCables clip."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cablesim  # noqa: F401
+from cablesim.commands.dataset import dataset_jobs
+from cablesim.dataset.randomize import Randomization, randomize_scene
+from cablesim.errors import ConfigError
+from cablesim.jobs import Job, execute, load_results
+from cablesim.sim.config import SceneConfig
+
+TINY = {"width": 160, "height": 120}
+FEW_HOSES = {"hoses": (2, 3)}
+CLIP_SEEDS = (402, 403)  # seeds whose tiny randomised scene gives a clip
+
+
+def _jobs(layout: str, seeds: tuple[int, ...], root: Path, split: str = "test") -> list[Job]:
+    jobs = dataset_jobs(layout, seeds[0], seeds[-1] + 1, root, split, TINY, periods=1)
+    return [
+        Job(j.kind, j.key, {**j.params, "randomize": FEW_HOSES})
+        for j in jobs
+        if j.params["seed"] in seeds
+    ]
+
+
+def _tree(root: Path) -> dict[str, bytes]:
+    return {
+        str(p.relative_to(root)): p.read_bytes()
+        for p in sorted(root.rglob("*.png")) + sorted(root.rglob("*.json"))
+        if "jobs" not in p.parts
+    }
+
+
+def test_randomised_scenes_depend_on_the_seed_only():
+    base = SceneConfig()
+    a, b = randomize_scene(7, base), randomize_scene(7, base)
+    assert a.to_dict() == b.to_dict() and a.seed == 7
+    many = [randomize_scene(s, base) for s in range(40)]
+    assert len({c.board.background for c in many}) == 4
+    assert {c.hoses.count for c in many} == set(range(2, 7))
+    assert len({c.hoses.colors for c in many}) > 2
+    assert all(c.light.jitter > 0 and c.camera.position_jitter > 0 for c in many)
+    assert base.light.jitter == 0 and base.camera.position_jitter == 0  # base untouched
+    with pytest.raises(ConfigError, match="hoses"):
+        Randomization(hoses=(3, 2)).validate()
+    with pytest.raises(ConfigError, match="backgrounds"):
+        Randomization(backgrounds=("lava",)).validate()
+
+
+@pytest.mark.slow
+def test_movingcables_clips_read_back_and_do_not_depend_on_workers(tmp_path):
+    from cablesim.formats.movingcables import evaluate_clip, list_clips, read_clip
+
+    two = tmp_path / "two_workers"
+    s = execute(_jobs("movingcables", CLIP_SEEDS, two), two / "jobs", workers=2, progress=False)
+    assert s.ok == 2, s.report()
+    one = tmp_path / "in_process"  # the second clip again, alone, in this process
+    s1 = execute(_jobs("movingcables", CLIP_SEEDS, one)[1:], one / "jobs", progress=False)
+    assert s1.ok == 1
+    clip2 = {k: v for k, v in _tree(two).items() if "/0002/" in k}
+    assert clip2 and clip2 == _tree(one)
+
+    split = two / "test"
+    assert list_clips(split) == ["0001", "0002"]
+    recs = {r["result"]["clip"]: r["result"] for r in load_results(two / "jobs", s_jobs(two))}
+    for name in ("0001", "0002"):
+        frames = list(read_clip(split, name))
+        assert [f.index for f in frames] == list(range(1, 2 * len(frames), 2))
+        assert len(frames) == recs[name]["images"] > 10
+        assert np.all(frames[0].flow == 0)  # the first image against itself
+        moving = int(recs[name]["hose"]) + 1  # instance id of the moved hose
+        peak = 0.0
+        for fr in frames:
+            inst = fr.instances
+            assert set(np.unique(inst)) >= {0, moving}
+            # flow lives on hose pixels only; the hoses that were not moved have exactly none
+            assert np.all(fr.flow[inst == 0] == 0)
+            others = (inst > 0) & (inst != moving)
+            assert np.all(fr.flow[others] == 0) and np.all(fr.normal_flow[others] == 0)
+            # normal flow is the flow's projection: never longer than the flow
+            on = inst == moving
+            nf, f = (np.linalg.norm(x[on], axis=1) for x in (fr.normal_flow, fr.flow))
+            assert np.all(nf <= f + 2 / 64)
+            peak = max(peak, float(f.max()))
+        assert peak > 1.0  # px: the hose moved (and came back: the action is periodic)
+        assert any(fr.stick_mask.any() for fr in frames)  # the arm, as the stick
+        _, summary = evaluate_clip(split, name, "farneback", thr_motion=1.0)
+        assert summary.images == len(frames) and np.isfinite(summary.epe)
+
+
+def s_jobs(root: Path) -> list[Job]:
+    return _jobs("movingcables", CLIP_SEEDS, root)
+
+
+@pytest.mark.slow
+def test_mcor_sequence_reads_back_with_its_annotation(tmp_path):
+    from cablesim.formats.mcor import read_mcor
+
+    seed = 4
+    s = execute(_jobs("mcor", (seed,), tmp_path), tmp_path / "jobs", progress=False)
+    rec = load_results(tmp_path / "jobs", _jobs("mcor", (seed,), tmp_path))[0]
+    assert s.ok == 1, rec["result"]
+    name = rec["result"]["sequence"]
+    folder = tmp_path / "motion_correlation_buffers" / name
+    doc = json.loads((folder / "actions_gripper.json").read_text())
+    seq = read_mcor(folder)
+    assert len(seq.stream) == rec["result"]["images"] == len(doc["action_buffer"])
+    assert seq.annotation is not None and seq.truth is not None
+    assert int(seq.truth.sum()) == rec["result"]["truth_pixels"] > 0
+    assert len(seq.arm_masks) == len(seq.stream)  # the arm masks of the published layout
+    assert set(doc["action_buffer"][:-1]) >= {0, 1}
+    assert seq.segment is not None and seq.segment.any()
