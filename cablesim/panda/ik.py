@@ -178,9 +178,11 @@ class ArmModel:
         q_posture: np.ndarray | None = None,
         opening: float = 0.08,
     ) -> IKResult:
-        """Differential IK from ``q_init`` to ``target``; joint limits are respected."""
+        """Differential IK from ``q_init`` to ``target``; joint limits are respected (a
+        ``q_init`` measured a hair outside them, as a real arm's can be, starts clipped)."""
         qpos = self.data.qpos.copy()
-        qpos[self._arm_qadr] = q_init
+        lo, hi = np.asarray(JOINT_LIMITS, dtype=float).T
+        qpos[self._arm_qadr] = np.clip(np.asarray(q_init, dtype=float), lo, hi)
         qpos[self._finger_qadr] = opening / 2.0
         self.configuration.update(qpos)
         posture = qpos.copy()
@@ -212,7 +214,7 @@ class ArmModel:
         else:
             err = self.frame_task.compute_error(self.configuration)
             pos_err, rot_err = float(np.linalg.norm(err[:3])), float(np.linalg.norm(err[3:]))
-        q = self.configuration.q[self._arm_qadr].copy()
+        q = np.clip(self.configuration.q[self._arm_qadr], lo, hi)
         converged = pos_err < self.position_tolerance and rot_err < self.rotation_tolerance
         return IKResult(q, converged, pos_err, rot_err, it)
 

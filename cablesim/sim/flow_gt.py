@@ -181,6 +181,8 @@ def edge_rotations(
         v0 = int(src.edge_start[h]) + h  # first vertex of hose h in the concatenation
         idx.append(v0 + np.clip(k[:, None] + np.arange(-1, 3)[None, :], 0, n_e))
         edges.append(int(src.edge_start[h]) + k)
+    if not idx:  # every hose carried MuJoCo's material frames
+        return R
     idx_all, e = np.concatenate(idx), np.concatenate(edges)
     ps = np.concatenate(src.verts)[idx_all]
     pd = np.concatenate(dst.verts)[idx_all]

@@ -206,48 +206,12 @@ class SimSession(Session):
     def _choose_start(self, draw: int) -> Any:
         """The hose of interest and its start segment in the current world (module docstring,
         rule 2); raises ``NoGraspableSegmentError`` when no hose qualifies."""
-        from cablesim.sim.layout import crossed_by, crossing_pairs
-        from cablesim.sim.picker import pick_segment
-
-        cfg, world = self.cfg, self.world
-        n = len(world.hoses)
-        if cfg.hose is not None:
-            candidates, pairs = [cfg.hose], None
-        else:
-            first = int(self.rng.integers(n))
-            candidates = [(first + i) % n for i in range(n)]
-            pairs = None
-            if cfg.clutter:
-                K = self.camera.intrinsics
-                pairs = crossing_pairs(
-                    [world.hose_vertices(i) for i in range(n)],
-                    self.camera.T_world_camera,
-                    K.f,
-                    K.cx,
-                    K.cy,
-                    K.width,
-                    K.height,
-                )
-        reasons: dict[str, int] = {}
-        why = []
-        for h in candidates:
-            if pairs is not None and not crossed_by(pairs, h):
-                reasons["crosses no other hose"] = reasons.get("crosses no other hose", 0) + 1
-                why.append(f"hose {h} crosses no other hose")
-                continue
-            try:
-                picked = pick_segment(world, self.robot, self.camera, h, self.rng, cfg.interaction)
-            except NoGraspableSegmentError as e:
-                for r, c in e.reasons.items():
-                    reasons[r] = reasons.get(r, 0) + c
-                why.append(str(e))
-                continue
-            self.hose = h
-            self.perturbation.hose_of_interest = h
-            return picked
-        raise NoGraspableSegmentError(
-            f"no hose of interest qualifies in draw {draw} ({'; '.join(why)})", reasons
+        hose, picked = choose_start(
+            self.world, self.robot, self.camera, self.rng, self.cfg, f"draw {draw}"
         )
+        self.hose = hose
+        self.perturbation.hose_of_interest = hose
+        return picked
 
     # ------------------------------------------------------------------ parts
     @property
@@ -377,3 +341,53 @@ def simulate_episode(
     if result.stream is not None:
         result.stream.meta.update(meta)
     return SimulatedEpisode(result, segment, session, start_image, draws)
+
+
+def choose_start(
+    world: Any, robot: Any, camera: Any, rng: Any, cfg: EpisodeConfig, where: str
+) -> tuple[int, Any]:
+    """The hose of interest and its start segment in ``world`` as seen by ``camera`` (module
+    docstring, rule 2): ``cfg.hose`` or, from ``rng``, a first hose and the others in turn,
+    each taken only when it crosses another hose in the image (``cfg.clutter``, with two
+    hoses or more) and shows a graspable segment.  Shared by :class:`SimSession` and the
+    digital twin; raises ``NoGraspableSegmentError`` (``where`` names the draw) when no hose
+    qualifies."""
+    from cablesim.sim.layout import crossed_by, crossing_pairs
+    from cablesim.sim.picker import pick_segment
+
+    n = len(world.hoses)
+    if cfg.hose is not None:
+        candidates, pairs = [cfg.hose], None
+    else:
+        first = int(rng.integers(n))
+        candidates = [(first + i) % n for i in range(n)]
+        pairs = None
+        if cfg.clutter and n > 1:  # one hose alone crosses nothing
+            K = camera.intrinsics
+            pairs = crossing_pairs(
+                [world.hose_vertices(i) for i in range(n)],
+                camera.T_world_camera,
+                K.f,
+                K.cx,
+                K.cy,
+                K.width,
+                K.height,
+            )
+    reasons: dict[str, int] = {}
+    why = []
+    for h in candidates:
+        if pairs is not None and not crossed_by(pairs, h):
+            reasons["crosses no other hose"] = reasons.get("crosses no other hose", 0) + 1
+            why.append(f"hose {h} crosses no other hose")
+            continue
+        try:
+            picked = pick_segment(world, robot, camera, h, rng, cfg.interaction)
+        except NoGraspableSegmentError as e:
+            for r, c in e.reasons.items():
+                reasons[r] = reasons.get(r, 0) + c
+            why.append(str(e))
+            continue
+        return h, picked
+    raise NoGraspableSegmentError(
+        f"no hose of interest qualifies in {where} ({'; '.join(why)})", reasons
+    )

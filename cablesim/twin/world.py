@@ -442,28 +442,28 @@ class TwinWorld:
         return fut.result(timeout)
 
     def pick_start(self, robot: Any, interaction: Any = None) -> tuple[int, Any]:
-        """The seeded hose of interest and start segment, drawn exactly as pure simulation
-        draws them (``SimSession.draw_hose`` then ``pick_start`` on the ``episode`` stream),
-        in the twin's current image; call it before :meth:`follow`, while the twin still
-        shows the settled scene.  ``robot`` judges reachability."""
+        """The seeded hose of interest and start segment, chosen exactly as pure simulation
+        chooses them (:func:`cablesim.sim.session.choose_start` on the draw's ``episode``
+        stream), in the twin's current image; call it before :meth:`follow`, while the twin
+        still shows the settled scene.  ``robot`` judges reachability.  The twin does not
+        re-draw its scene: a draw with no qualifying hose raises ``NoGraspableSegmentError``
+        (give the draw that pure simulation used: ``SceneConfig.draw``)."""
         from cablesim.seeding import stream
-        from cablesim.sim.picker import pick_segment
+        from cablesim.sim.session import choose_start
 
-        rng = stream(self.cfg.seed, "episode")
-        hose = self.cfg.hose
-        if hose is None:
-            hose = int(rng.integers(len(self.world.hoses)))
-        icfg = interaction or self.cfg.interaction
+        draw = self.cfg.scene.draw
+        rng = stream(self.cfg.seed, "episode", *((draw,) if draw else ()))
+        cfg = self.cfg if interaction is None else self.cfg.replace(interaction=interaction)
 
-        def pick(twin: TwinWorld) -> Any:
+        def pick(twin: TwinWorld) -> tuple[int, Any]:
             # with the scene's own tessellation: the same image as pure simulation's
             camera = twin._camera(twin._scene_tessellation)
             try:
-                return pick_segment(twin.world, robot, camera, hose, rng, icfg)
+                return choose_start(twin.world, robot, camera, rng, cfg, f"draw {draw}")
             finally:
                 camera.close()
 
-        return hose, self.call(pick)
+        return self.call(pick)
 
     def follow(self, max_joint_error: float = 0.05, timeout: float = 10.0) -> None:
         """Start following the attached robot.  The robot must stand where the twin's arm is

@@ -16,7 +16,6 @@ from cablesim.sim.session import EpisodeConfig, SimSession
 
 CFG = EpisodeConfig(
     seed=2,
-    hose=1,
     scene=SceneConfig(hoses=HoseConfig(count=3), camera=CameraConfig(width=160, height=120)),
 )
 
@@ -87,6 +86,10 @@ def test_dry_run_plans_a_whole_interaction_without_moving(session):
     kinds = [m.kind for m in plan.log]
     assert kinds.count("move_to") >= 2 + 2 * 4 * CFG.interaction.actions.periods
     assert "grasp" in kinds and "move_joints" in kinds
-    assert all(m.ok for m in plan.log)
+    # a refused motion is logged with its reason and left unmoved; the runner then takes its
+    # fallback (e.g. a joint motion to the stand-off that would touch the board: straight in)
+    refused = [m for m in plan.log if not m.ok]
+    assert all(m.reason for m in refused)
+    assert len(refused) < len(plan.log) // 4
     # the planned grasp lies at the estimated segment centre
     assert np.linalg.norm(result.grasp.position - result.centre) < 1e-6
