@@ -197,6 +197,57 @@ def from_dict(cls: type[T], data: dict[str, Any], path: str = "") -> T:
     return cls(**kwargs)
 
 
+def parse_value(text: str) -> Any:
+    """A command-line value: JSON (``3``, ``0.5``, ``true``, ``null``, ``[1, 2]``,
+    ``"text"``), Python's ``True``/``False``/``None``, else the text itself."""
+    named = {"True": True, "False": False, "None": None}
+    if text in named:
+        return named[text]
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def override(cfg: T, assignment: str) -> T:
+    """``cfg`` (a config dataclass) with one field set from ``"dotted.path=value"`` (the value
+    as :func:`parse_value` reads it), rebuilt through :func:`from_dict` so that the new value
+    is type-checked like a loaded file; an unknown path or a bad value is a ``ConfigError``
+    naming the field."""
+    path, sep, text = assignment.partition("=")
+    path = path.strip()
+    if not sep or not path:
+        raise ConfigError("--set", f"expected FIELD=VALUE, got {assignment!r}")
+    data = to_dict(cfg)
+    node: Any = data
+    keys = path.split(".")
+    for i, key in enumerate(keys):
+        where = ".".join(keys[: i + 1])
+        if not isinstance(node, dict) or key not in node:
+            known = ", ".join(sorted(node)) if isinstance(node, dict) else "none (not a section)"
+            raise ConfigError(where, f"no such field (fields here: {known})")
+        if i == len(keys) - 1:
+            node[key] = parse_value(text.strip())
+        else:
+            node = node[key]
+    return from_dict(type(cfg), data)
+
+
+def flatten(cfg: Any) -> list[tuple[str, Any]]:
+    """(dotted path, value) of every leaf field of a config: what ``override`` can set."""
+    out: list[tuple[str, Any]] = []
+
+    def walk(prefix: str, value: Any) -> None:
+        if isinstance(value, dict) and value:
+            for k, v in value.items():
+                walk(f"{prefix}{k}.", v)
+        else:
+            out.append((prefix.rstrip("."), value))
+
+    walk("", to_dict(cfg))
+    return out
+
+
 def pretty(cfg: Any) -> str:
     """Human-readable JSON of a config."""
     return json.dumps(to_dict(cfg), indent=2, sort_keys=False)

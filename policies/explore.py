@@ -329,9 +329,24 @@ class Exploration:
         return flow
 
     def run(self) -> ExplorationResult:
+        """Interactions until the budget is met (a progress bar of them when ``say`` is a
+        :class:`~cablesim.progress.Progress`)."""
+        bar = getattr(self.say, "bar", None)
+        if bar is None:
+            return self._run(None)
+        with bar(self.cfg.grasps, "interactions", unit="grasp") as b:
+            return self._run(b)
+
+    def _run(self, bar: Any) -> ExplorationResult:
         cfg, res = self.cfg, self.result
         while len(res.successes) < cfg.grasps and len(res.interactions) < cfg.max_attempts:
             inter = self.attempt(len(res.interactions))
+            if bar is not None:
+                bar.update(int(inter.success))
+                bar.set_postfix(
+                    attempts=len(res.interactions),
+                    failed=len(res.interactions) - len(res.successes),
+                )
             if self.writer is not None and not inter.success:
                 self.writer.failed(inter)
             if len(res.successes) >= cfg.grasps:

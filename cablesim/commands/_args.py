@@ -5,12 +5,14 @@ alike)."""
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
-from cablesim.errors import InputError
+from cablesim.config import flatten, override
+from cablesim.errors import ConfigError, InputError
 from cablesim.panda.visuals import VISUALS
 from cablesim.sim.config import SceneConfig
 
@@ -61,8 +63,77 @@ def check_settle_cache(scene: SceneConfig) -> None:
         scene.physics.cache = False
 
 
+def add_config_arguments(p: argparse.ArgumentParser) -> None:
+    """``--config FILE``, ``--set FIELD=VALUE`` and ``--show-config``: the whole typed config
+    of a command from the line (see :func:`build_config`)."""
+    g = p.add_argument_group("configuration (every field of the typed config)")
+    g.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="start from this JSON config (a run's config.json: rerun it); flags given on the "
+        "line and --set override it",
+    )
+    g.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="set any field by its dotted path, e.g. --set episode.scene.hoses.count=3 "
+        "(JSON values; repeatable; --show-config lists the fields)",
+    )
+    g.add_argument(
+        "--show-config",
+        action="store_true",
+        help="print every field of the config this command line gives, and exit",
+    )
+
+
+def load_config(cls: type, args: argparse.Namespace, section: str | None = None) -> Any:
+    """The base config of a command: ``cls()``, or ``--config FILE`` (a config as written by
+    ``to_dict``; a run's file that holds several configs names this one ``section``)."""
+    path = getattr(args, "config", None)
+    if path is None:
+        return cls()
+    try:
+        data = json.loads(Path(path).read_text())
+    except OSError as e:
+        raise InputError(f"--config {path}: cannot read it ({e.strerror or e})") from e
+    except ValueError as e:
+        raise InputError(f"--config {path}: not JSON ({e})") from e
+    if isinstance(data, dict) and section is not None and isinstance(data.get(section), dict):
+        data = data[section]
+    try:
+        return cls.from_dict(data)
+    except ConfigError as e:
+        raise InputError(f"--config {path}: {e}") from e
+
+
+def finish_config(cfg: Any, args: argparse.Namespace) -> Any:
+    """``cfg`` with every ``--set FIELD=VALUE`` applied (in order), validated."""
+    for assignment in getattr(args, "set", None) or []:
+        cfg = override(cfg, assignment)
+    return cfg.validate()
+
+
+def show_config(cfg: Any) -> int:
+    """``--show-config``: one ``field = value`` line per field (what ``--set`` takes)."""
+    for path, value in flatten(cfg):
+        print(f"{path} = {json.dumps(value)}")
+    return 0
+
+
+def write_config(out: Path, cfg: Any, **extra: Any) -> Path:
+    """The run's config as ``out/config.json`` (rerun it with ``--config``)."""
+    doc = {**cfg.to_dict(), **extra} if extra else cfg.to_dict()
+    path = Path(out) / "config.json"
+    path.write_text(json.dumps(doc, indent=2) + "\n")
+    return path
+
+
 def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed") -> None:
-    p.add_argument("--seed", type=int, default=0, help=f"{seed_help} (default 0)")
+    add_config_arguments(p)
+    p.add_argument("--seed", type=int, default=None, help=f"{seed_help} (default 0)")
     p.add_argument(
         "--draw",
         type=int,
@@ -88,7 +159,8 @@ def add_interaction_arguments(p: argparse.ArgumentParser) -> None:
 
 def apply_scene_arguments(scene: SceneConfig, args: argparse.Namespace) -> SceneConfig:
     """``scene`` with the scene arguments that were given (in place; returned)."""
-    scene.seed = args.seed
+    if getattr(args, "seed", None) is not None:
+        scene.seed = args.seed
     if getattr(args, "draw", None) is not None:
         scene.draw = args.draw
     if args.hoses is not None:

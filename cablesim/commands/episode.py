@@ -28,8 +28,12 @@ from cablesim.commands._args import (
     apply_interaction_arguments,
     apply_scene_arguments,
     check_settle_cache,
+    finish_config,
+    load_config,
     output_path,
     prepare_output_dir,
+    show_config,
+    write_config,
 )
 from cablesim.perception.frames import LABEL_ROBOT, Stream
 from cablesim.recording import RecordingWriter
@@ -55,12 +59,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> EpisodeConfig:
-    cfg = EpisodeConfig(seed=args.seed, hose=args.hose, progress=not args.quiet)
+    cfg = load_config(EpisodeConfig, args)
+    if args.seed is not None:
+        cfg.seed = args.seed
+    if args.hose is not None:
+        cfg.hose = args.hose
+    cfg.progress = not args.quiet
     apply_scene_arguments(cfg.scene, args)
     apply_interaction_arguments(cfg.interaction, args)
     if args.push:
         cfg.interaction.kind = "push"
-    return cfg.validate()
+    return finish_config(cfg, args)
 
 
 def contact_sheet(
@@ -89,11 +98,14 @@ def run(args: argparse.Namespace) -> int:
     from cablesim.sim.session import simulate_episode
 
     cfg = config_from_args(args)
+    if args.show_config:
+        return show_config(cfg)
     out = prepare_output_dir(args.out)
     RecordingWriter.check_target(out / "recording", args.overwrite, "--overwrite")
     check_settle_cache(cfg.scene)
+    write_config(out, cfg)
     if cfg.progress:
-        print(f"[episode] config:\n{cfg}")
+        print(f"[episode] seed {cfg.seed}: config in {out / 'config.json'}")
     ep = simulate_episode(cfg, record_to=out / "recording", overwrite=args.overwrite)
     try:
         res = ep.result

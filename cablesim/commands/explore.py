@@ -35,32 +35,37 @@ from cablesim.commands._args import (
     apply_interaction_arguments,
     apply_scene_arguments,
     check_settle_cache,
+    finish_config,
+    load_config,
     prepare_output_dir,
+    show_config,
+    write_config,
 )
 from cablesim.errors import InputError
 from cablesim.policies.config import FLOWS, MERGES, STRATEGIES, ExploreConfig
 from cablesim.robot.guard import SafetyConfig
-from cablesim.sim.perturb import PerturbConfig
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p, "scene and exploration seed")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument("--hose", type=int, default=None, help="hose of interest (default: drawn)")
-    p.add_argument("--grasps", type=int, default=3, help="budget of successful grasps (3)")
-    p.add_argument("--strategy", choices=STRATEGIES, default="sampler", help="next-grasp policy")
+    p.add_argument("--grasps", type=int, default=None, help="budget of successful grasps (3)")
+    p.add_argument(
+        "--strategy", choices=STRATEGIES, default=None, help="next-grasp policy (sampler)"
+    )
     p.add_argument(
         "--method",
         choices=("correlation", "segmentation", "ablation"),
         default=None,
         help="segmentation method (default: correlation; segmentation for --strategy push)",
     )
-    p.add_argument("--flow", choices=FLOWS, default="dis", help="optical flow back end (dis)")
+    p.add_argument("--flow", choices=FLOWS, default=None, help="optical flow back end (dis)")
     p.add_argument("--raft-checkpoint", type=Path, default=None, help="weights for --flow raft")
     p.add_argument(
         "--merge",
         choices=MERGES,
-        default="dis",
+        default=None,
         help="vote carrying between targets: dis (default), oracle (ground truth), none",
     )
     p.add_argument("--perturb", action="store_true", help="disturb neighbouring hoses in actions")
@@ -89,21 +94,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> ExploreConfig:
-    cfg = ExploreConfig(
-        seed=args.seed,
-        hose=args.hose,
-        grasps=args.grasps,
-        max_attempts=max(2 * args.grasps, args.grasps + 2),
-        strategy=args.strategy,
-        method=args.method,
-        flow=args.flow,
-        merge=args.merge,
-        perturb=PerturbConfig(enabled=bool(args.perturb)),
-        progress=not args.quiet,
-    )
+    """``ExploreConfig()`` or ``--config FILE``, then the flags given, then ``--set``."""
+    cfg = load_config(ExploreConfig, args, "explore")
+    for name in ("seed", "hose", "strategy", "method", "flow", "merge"):
+        if getattr(args, name) is not None:
+            setattr(cfg, name, getattr(args, name))
+    if args.grasps is not None:
+        cfg.grasps = args.grasps
+        cfg.max_attempts = max(2 * args.grasps, args.grasps + 2)
+    if args.perturb:
+        cfg.perturb = dataclasses.replace(cfg.perturb, enabled=True)
+    cfg.progress = not args.quiet
     apply_scene_arguments(cfg.episode.scene, args)
     apply_interaction_arguments(cfg.episode.interaction, args)
-    return cfg.validate()
+    return finish_config(cfg, args)
 
 
 def _flow_kwargs(cfg: ExploreConfig, args: argparse.Namespace) -> dict | None:
@@ -119,6 +123,8 @@ def _flow_kwargs(cfg: ExploreConfig, args: argparse.Namespace) -> dict | None:
 
 def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
+    if args.show_config:
+        return show_config(cfg)
     flow_kwargs = _flow_kwargs(cfg, args)
     args.out = prepare_output_dir(args.out)
     if args.robot != "sim":
@@ -126,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
     from cablesim.policies.explore import explore
 
     check_settle_cache(cfg.episode.scene)
+    write_config(args.out, cfg)
     record_to = args.out / "recordings" if args.record else None
     res = explore(cfg, out=args.out, flow_kwargs=flow_kwargs, record_to=record_to)
     print(res.summary())
@@ -213,7 +220,7 @@ def run_real(args: argparse.Namespace, cfg: ExploreConfig, flow_kwargs: dict | N
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.json").write_text(
         json.dumps({"explore": cfg.to_dict(), "real": real.to_dict()}, indent=2) + "\n"
-    )
+    )  # --config reads its "explore" part back
     say = Progress("explore", cfg.progress)
     session = RealSession.open(real, dry_run=args.dry_run)
     try:

@@ -24,8 +24,12 @@ from cablesim.commands._args import (
     add_scene_arguments,
     apply_scene_arguments,
     check_settle_cache,
+    finish_config,
+    load_config,
     output_path,
     prepare_output_dir,
+    show_config,
+    write_config,
 )
 from cablesim.config import to_dict
 from cablesim.errors import InputError
@@ -59,13 +63,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def scene_config(args: argparse.Namespace) -> SceneConfig:
-    cfg = apply_scene_arguments(SceneConfig(), args)
+    cfg = apply_scene_arguments(load_config(SceneConfig, args, "config"), args)
     if args.background is not None:
         cfg.board.background = args.background
     if args.no_robot:
         cfg.robot.enabled = False
-    cfg.camera.depth_noise = bool(args.depth_noise)
-    return cfg.validate()
+    if args.depth_noise:
+        cfg.camera.depth_noise = True
+    return finish_config(cfg, args)
 
 
 def pull_hose(world, hose_index: int, distance: float, duration: float) -> dict:
@@ -104,9 +109,12 @@ def run(args: argparse.Namespace) -> int:
     from cablesim.sim.world import World
 
     cfg = scene_config(args)
+    if args.show_config:
+        return show_config(cfg)
     if not 0 <= args.hose < cfg.hoses.count:
         raise InputError(f"--hose {args.hose} is not one of the {cfg.hoses.count} hoses")
     out = prepare_output_dir(args.out)
+    write_config(out, cfg)
     check_settle_cache(cfg)
     t0 = time.perf_counter()
     print(

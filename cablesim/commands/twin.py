@@ -23,6 +23,9 @@ from cablesim.commands._args import (
     add_scene_arguments,
     apply_interaction_arguments,
     apply_scene_arguments,
+    finish_config,
+    load_config,
+    show_config,
 )
 from cablesim.sim.session import EpisodeConfig
 
@@ -42,10 +45,16 @@ def run(args: argparse.Namespace) -> int:
     from cablesim.twin.episode import sim_episode, twin_episode
     from cablesim.viz import errors_tile, overlay_votes, panel, write_png
 
-    cfg = EpisodeConfig(seed=args.seed, hose=args.hose)
+    cfg = load_config(EpisodeConfig, args)
+    if args.seed is not None:
+        cfg.seed = args.seed
+    if args.hose is not None:
+        cfg.hose = args.hose
     apply_scene_arguments(cfg.scene, args)
     apply_interaction_arguments(cfg.interaction, args)
-    cfg = cfg.validate()
+    cfg = finish_config(cfg, args)
+    if args.show_config:
+        return show_config(cfg)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     say = quiet if args.quiet else Progress("twin")
