@@ -78,15 +78,17 @@ def render(rep: dict[str, Any]) -> str:
     for name in ("before", "after", "oracle", "oracle+support"):
         if f"{name}/noisy" not in res:
             continue
-        rn, rc = res[f"{name}/noisy"], res[f"{name}/clean"]
+        rn, rc = res[f"{name}/noisy"], res.get(f"{name}/clean")
         for method in ("correlation", "segmentation", "ablation"):
             for board in ("wood", "solid", "all"):
                 a = rn["methods"][method]["test"]["0.4"][board]
-                b = rc["methods"][method]["test"]["0.4"][board]
+                clean = "not run | - | - | -"
+                if rc is not None:
+                    clean = _row4(rc["methods"][method]["test"]["0.4"][board])
                 bold = "**" if board == "all" and method == "correlation" else ""
                 L.append(
                     f"| {bold}{name}{bold} {_combo(rn['combo'])} | {method} | {board} "
-                    f"({a['n']}) | {_row4(a)} | {a['empty']} | {_row4(b)} |"
+                    f"({a['n']}) | {_row4(a)} | {a['empty']} | {clean} |"
                 )
     L += [
         "",
@@ -133,8 +135,11 @@ def render(rep: dict[str, Any]) -> str:
     for name in ("before", "after", "oracle"):
         if f"{name}/noisy" in res:
             a = res[f"{name}/noisy"]["methods"]["correlation"]["test"]["0.4"]["fp_near_hose"]
-            b = res[f"{name}/clean"]["methods"]["correlation"]["test"]["0.4"]["fp_near_hose"]
-            L.append(f"| {name} | {a:.0%} | {b:.0%} |")
+            clean = res.get(f"{name}/clean")
+            b = "not run"
+            if clean is not None:
+                b = f"{clean['methods']['correlation']['test']['0.4']['fp_near_hose']:.0%}"
+            L.append(f"| {name} | {a:.0%} | {b} |")
     L.append("")
 
     L += [

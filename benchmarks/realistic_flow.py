@@ -4,7 +4,7 @@
     nice -n 10 .venv/bin/python benchmarks/realistic_flow.py evaluate    # perception + tables
 
 ``record`` simulates one grasp interaction per scene (perturbed neighbours, arm masks, ground
-truth; validation seeds from 300, test seeds from 400, the first scenes whose interaction
+truth; validation seeds from 300, test seeds from 600, the first scenes whose interaction
 succeeds; the first half of them again on the solid board) into ``~/.cache/cablesim/streams``
 (``$CABLESIM_STREAMS``) and skips scenes already there.  ``evaluate`` runs the perception
 variants on the recorded streams (flow once per stream and back end, cached statistics),
@@ -48,7 +48,9 @@ from _rf_record import Scene, record, recorded  # noqa: E402
 
 # scene counts: what a shared 2-core machine allowed (one interaction ~45 s CPU to simulate)
 VAL_SEEDS, VAL_WANT, VAL_SOLID = range(300, 400), 12, 6
-TEST_SEEDS, TEST_WANT, TEST_SOLID = range(400, 500), 12, 6
+# test seeds from 600: recorded and scored once, after the defaults were chosen on validation
+# (seeds 400-411, an earlier test range, were looked at while the remedies were developed)
+TEST_SEEDS, TEST_WANT, TEST_SOLID = range(600, 700), 12, 6
 RESULTS = Path(__file__).resolve().parent / "results"
 
 # candidates measured on the validation scenes (noisy): flow back end -> per-sample variants
@@ -218,6 +220,11 @@ def main() -> None:
     e = sub.add_parser("evaluate")
     e.add_argument("--skip-explore", action="store_true")
     e.add_argument("--skip-proposals", action="store_true")
+    e.add_argument(
+        "--noisy-only",
+        action="store_true",
+        help="only the camera's noise models on (SPEC 7); skip the noise-free twins",
+    )
     e.add_argument("--out", type=Path, default=RESULTS / "realistic_flow.md")
     args = ap.parse_args()
 
@@ -262,21 +269,23 @@ def main() -> None:
     combos = {"before": BEFORE, "after": AFTER, "oracle": ORACLE}
     combos["oracle+support"] = ("oracle", "arm", AFTER[2])
     timings = {}
-    for noisy in (True, False):
+    noises = (True,) if args.noisy_only else (True, False)
+    report["noise"] = ["noisy"] if args.noisy_only else ["noisy", "clean"]
+    for noisy in noises:
         log(f"statistics for the test tables ({'noisy' if noisy else 'noise-free'}) ...")
         plan = _plan(*combos.values())
         timings.update(ensure_stats(val + test, noisy, plan, log))
     report["timings_cpu_ms_per_frame"] = timings
     report["results"] = {}
     for name, combo in combos.items():
-        for noisy in (True, False):
+        for noisy in noises:
             key = f"{name}/{'noisy' if noisy else 'clean'}"
             log(f"tuning and scoring {key} ...")
             report["results"][key] = evaluate_combo(combo, val, test, noisy)
     report["spec_thresholds"] = {
         f"{n}/{'noisy' if z else 'clean'}": spec_thresholds(combos[n], test, z)
         for n in ("before", "after")
-        for z in (True, False)
+        for z in noises
     }
     if not args.skip_proposals:
         log("grasp proposals on the test scenes (noisy) ...")
