@@ -33,6 +33,7 @@ from _interaction import (  # noqa: E402
     uptime,
     versions_line,
 )
+from _machine import write_results  # noqa: E402
 
 single_thread_environment()
 
@@ -118,9 +119,7 @@ def main() -> int:
     text = report(meta, runs, args.baseline)
     print(text)
     if args.write:
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text(text)
-        print(f"wrote {RESULTS}")
+        write_results(RESULTS, text)
     return 0
 
 

@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
+from _machine import cpu_model, write_results  # noqa: E402  (benchmarks/ is on sys.path)
 
 import cablesim  # noqa: F401  (selects the headless GL back end)
 from cablesim.episode.config import ActionConfig, InteractionConfig
@@ -134,9 +134,7 @@ def main() -> int:
     text = "\n".join(lines)
     print("\n".join(lines[: 12 + len(rows)]))
     if args.write:
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text(text)
-        print(f"wrote {RESULTS}")
+        write_results(RESULTS, text)
     return 0
 
 

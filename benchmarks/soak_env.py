@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
+from _machine import cpu_model, write_results  # noqa: E402  (benchmarks/ is on sys.path)
 
 import cablesim  # noqa: F401  (selects the headless GL back end)
 from cablesim.envs import HoseExploreConfig, HoseExploreEnv
@@ -170,9 +170,7 @@ def main() -> int:
     text = "\n".join(lines)
     print(text)
     if args.write:
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text(text)
-        print(f"wrote {RESULTS}")
+        write_results(RESULTS, text)
     return 0
 
 

@@ -93,3 +93,11 @@ def test_config_file_with_a_bad_value_names_file_and_field(tmp_path, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert str(path) in err and "scene.camera.width" in err
+
+
+@pytest.mark.parametrize("command", ["scene", "episode", "explore"])
+def test_out_is_needed_to_run_but_not_to_show_the_config(command, capsys):
+    assert main([command, "--show-config"]) == 0
+    capsys.readouterr()
+    assert main([command]) == 2
+    assert "--out is required" in capsys.readouterr().err

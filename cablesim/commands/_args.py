@@ -28,6 +28,8 @@ def output_path(text: str) -> Path:
 def prepare_output_dir(out: Path | str, flag: str = "--out") -> Path:
     """Create the output directory ``out`` (and its parents) and make sure files can be
     written there, before any expensive step; ``InputError`` naming the flag and the path."""
+    if out is None:
+        raise InputError(f"{flag} is required: give an output directory")
     if str(out).strip() == "":
         raise InputError(f"{flag} is empty: give an output directory")
     out = Path(out)

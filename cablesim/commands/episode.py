@@ -52,7 +52,7 @@ from cablesim.viz import (
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p, "episode and scene seed")
     p.add_argument("--hose", type=int, default=None, help="hose to grasp (default: drawn)")
-    p.add_argument("--out", type=output_path, required=True, help="output directory")
+    p.add_argument("--out", type=output_path, default=None, help="output directory (required)")
     add_interaction_arguments(p)
     p.add_argument("--push", action="store_true", help="push (poke) instead of grasping")
     p.add_argument("--overwrite", action="store_true", help="replace an existing recording")

@@ -48,7 +48,7 @@ from cablesim.robot.guard import SafetyConfig
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p, "scene and exploration seed")
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=Path, default=None, help="output directory (required)")
     p.add_argument("--hose", type=int, default=None, help="hose of interest (default: drawn)")
     p.add_argument("--grasps", type=int, default=None, help="budget of successful grasps (3)")
     p.add_argument(

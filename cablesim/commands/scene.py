@@ -55,7 +55,7 @@ PULL_MAX_FORCE = 6.0  # N
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
-    p.add_argument("--out", type=output_path, required=True, help="output directory")
+    p.add_argument("--out", type=output_path, default=None, help="output directory (required)")
     p.add_argument("--background", choices=BACKGROUNDS, default=None, help="board background")
     p.add_argument("--hose", type=int, default=0, help="which hose to pull (default 0)")
     p.add_argument("--no-robot", action="store_true", help="leave the arm out of the scene")

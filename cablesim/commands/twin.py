@@ -25,6 +25,7 @@ from cablesim.commands._args import (
     apply_scene_arguments,
     finish_config,
     load_config,
+    prepare_output_dir,
     show_config,
 )
 from cablesim.sim.session import EpisodeConfig
@@ -32,7 +33,7 @@ from cablesim.sim.session import EpisodeConfig
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p, "scene and episode seed")
-    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument("--out", type=Path, default=None, help="output directory (required)")
     p.add_argument("--hose", type=int, default=None, help="hose of interest (default: drawn)")
     add_interaction_arguments(p)
     p.add_argument("--no-server", action="store_true", help="use a franka-sim already running")
@@ -55,8 +56,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = finish_config(cfg, args)
     if args.show_config:
         return show_config(cfg)
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
+    out: Path = prepare_output_dir(args.out)
     say = quiet if args.quiet else Progress("twin")
     if args.no_server:
         ep = twin_episode(cfg, say=say, monitor_every=5.0 if not args.quiet else 0.0)
