@@ -30,7 +30,8 @@ from cablesim.perception.correlation import (
     CorrelationParams,
     CorrelationResult,
 )
-from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow, RegionFlow
+from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow
+from cablesim.perception.flow_region import FlowRegion, RegionFlow
 from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.perception.pipeline import StreamStatistics, plan_jobs
 from cablesim.perception.refine import (
@@ -163,10 +164,10 @@ FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {
         "medium", finest_scale=1, patch_size=8, patch_stride=4, gradient_descent_iters=12
     ),
     "dis-medium-board1.5": lambda s: RegionFlow(
-        DISFlow("medium"), board_crop(s.scene, s.stream.intrinsics), 1.5
+        DISFlow("medium"), FlowRegion.from_crop(board_crop(s.scene, s.stream.intrinsics), 1.5)
     ),
     "dis-fast-board1.5": lambda s: RegionFlow(
-        DISFlow("fast"), board_crop(s.scene, s.stream.intrinsics), 1.5
+        DISFlow("fast"), FlowRegion.from_crop(board_crop(s.scene, s.stream.intrinsics), 1.5)
     ),
 }
 

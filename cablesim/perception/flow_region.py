@@ -71,6 +71,18 @@ class FlowRegion:
         }
 
     @staticmethod
+    def from_crop(
+        crop: tuple[int, int, int, int] | None = None, scale: float | None = None
+    ) -> FlowRegion:
+        """From a crop (x0, y0, width, height) or None (the whole image) and a scale (None or
+        1: none), e.g. ``FlowRegion.from_crop(board_region(cfg, K), 1.5)``."""
+        if crop is not None and (len(crop) != 4 or any(int(c) != c for c in crop)):
+            raise InputError(f"crop must be (x0, y0, width, height) integers, got {crop!r}")
+        origin = None if crop is None else (int(crop[0]), int(crop[1]))
+        size = None if crop is None else (int(crop[2]), int(crop[3]))
+        return FlowRegion(origin, size, None if scale in (None, 1, 1.0) else scale)
+
+    @staticmethod
     def from_meta(meta: dict[str, Any]) -> FlowRegion:
         """From a stream's ``crop_origin`` / ``crop_size`` / ``scale_factor`` (any may be None)."""
         o, s = meta.get("crop_origin"), meta.get("crop_size")

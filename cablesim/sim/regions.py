@@ -2,10 +2,10 @@
 
 ``board_region(cfg, intrinsics)`` is the task board's front face in the image: the crop in
 which the thesis computed its flow (SPEC section 8: the task-board region of the 1280x720
-image, scaled up 1.5x), for :class:`cablesim.perception.flow.RegionFlow`::
+image, scaled up 1.5x), for :class:`cablesim.perception.flow_region.RegionFlow`::
 
     crop = board_region(scene_cfg, camera.intrinsics)        # (x0, y0, width, height)
-    flow = RegionFlow(DISFlow(), crop, scale=1.5)
+    flow = RegionFlow(DISFlow(), FlowRegion.from_crop(crop, 1.5))
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ from cablesim.perception import (
     compute_statistics,
     segment_stream,
 )
-from cablesim.perception.flow import RegionFlow
+from cablesim.perception.flow_region import FlowRegion, RegionFlow
 from cablesim.perception.refine import (
     RAW,
     ForegroundParams,
@@ -55,7 +55,7 @@ class _Constant(FlowEstimator):
 def test_region_flow_crops_scales_and_pastes():
     img = np.zeros((H, W, 3), np.uint8)
     base = _Constant((3.0, -1.5))
-    rf = RegionFlow(base, crop=(20, 10, 80, 60), scale=1.5)
+    rf = RegionFlow(base, FlowRegion.from_crop((20, 10, 80, 60), 1.5))
     flow = rf.compute(img, img)
     assert base.seen[:2] == (90, 120)  # the crop scaled up 1.5x
     inside = flow[10:70, 20:100]
@@ -63,13 +63,15 @@ def test_region_flow_crops_scales_and_pastes():
     outside = np.ones((H, W), bool)
     outside[10:70, 20:100] = False
     assert np.all(flow[outside] == 0)
-    assert rf.describe()["crop"] == (20, 10, 80, 60) and rf.describe()["scale"] == 1.5
-    with pytest.raises(InputError, match="does not fit"):
-        RegionFlow(base, crop=(100, 10, 80, 60)).compute(img, img)
+    region = rf.describe()["region"]
+    assert region["crop_origin"] == [20, 10] and region["crop_size"] == [80, 60]
+    assert region["scale_factor"] == 1.5
+    with pytest.raises(InputError, match="exceeds"):
+        RegionFlow(base, FlowRegion.from_crop((100, 10, 80, 60))).compute(img, img)
     with pytest.raises(InputError, match="scale"):
-        RegionFlow(base, scale=0.0)
+        FlowRegion.from_crop(None, 0.0)
     with pytest.raises(InputError, match="crop"):
-        RegionFlow(base, crop=(0, 0, 2, 2))
+        FlowRegion.from_crop((0, 0, 2.5, 2))
 
 
 def test_region_flow_recovers_an_analytic_translation():
@@ -78,7 +80,7 @@ def test_region_flow_recovers_an_analytic_translation():
     a = np.repeat(np.clip(t, 0, 255).astype(np.uint8)[..., None], 3, 2)
     b = np.repeat(np.clip(shifted(t, dx, dy), 0, 255).astype(np.uint8)[..., None], 3, 2)
     crop = (30, 20, 100, 80)
-    flow = RegionFlow(DISFlow("medium"), crop, scale=1.5).compute(a, b)
+    flow = RegionFlow(DISFlow("medium"), FlowRegion.from_crop(crop, 1.5)).compute(a, b)
     x0, y0, w, h = crop
     inner = flow[y0 + 8 : y0 + h - 8, x0 + 8 : x0 + w - 8]
     err = np.linalg.norm(inner - np.float32([dx, dy]), axis=-1)
