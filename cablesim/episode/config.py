@@ -77,6 +77,9 @@ class ActionConfig:
     periods: int = 3  # K_p
     speed: float = 0.05  # m/s peak TCP speed of each stroke
     stroke_tolerance: float = 0.01  # m a stroke may end off its target (a taut hose pulls back)
+    # a stroke that ends further off still counts when the hand covered at least this share
+    # of it along its direction (a taut hose stopped it; the frames record where it went)
+    min_stroke_coverage: float = 0.25
 
     def validate(self) -> None:
         check_fields(self, "actions.")
@@ -92,6 +95,10 @@ class ActionConfig:
         check_positive("actions.amplitude", self.amplitude)
         check_positive("actions.speed", self.speed)
         check_positive("actions.stroke_tolerance", self.stroke_tolerance, allow_zero=True)
+        if not 0 < self.min_stroke_coverage <= 1:
+            raise ConfigError(
+                "actions.min_stroke_coverage", f"must be in (0, 1], got {self.min_stroke_coverage}"
+            )
         if not isinstance(self.periods, int) or self.periods < 1:
             raise ConfigError("actions.periods", f"must be an integer >= 1, got {self.periods!r}")
 

@@ -411,15 +411,27 @@ def periodic_waypoints(
 
 
 def _run_waypoints(
-    robot: Robot, waypoints: list[Pose], speed: float, step: str, tolerance: float = 0.0
+    robot: Robot,
+    waypoints: list[Pose],
+    speed: float,
+    step: str,
+    tolerance: float = 0.0,
+    min_coverage: float = 1.0,
 ) -> PrimitiveResult:
-    """Stroke by stroke; a stroke that ends within ``tolerance`` of its target (the hose pulls
-    the hand a little off) counts as done and is noted in ``details["short_strokes"]``."""
+    """Stroke by stroke; a stroke that ends off its target because the hose pulls the hand
+    back counts as done when it ends within ``tolerance`` of the target or the hand covered at
+    least ``min_coverage`` of the stroke along its direction (a taut hose stopped it); each is
+    noted (distance to the target) in ``details["short_strokes"]``."""
     short: list[float] = []
     for i, w in enumerate(waypoints):
+        start = robot.ee_pose().position
         r = robot.move_to(w, speed=speed)
         if not r:
-            if not r.reason.startswith("target not reached") or not (r.position_error <= tolerance):
+            ok = r.reason.startswith("target not reached") and (
+                r.position_error <= tolerance
+                or _coverage(start, robot.ee_pose().position, w.position) >= min_coverage
+            )
+            if not ok:
                 return PrimitiveResult.fail(
                     f"{step} stroke {i + 1}/{len(waypoints)}", r, short_strokes=short
                 )
@@ -427,6 +439,15 @@ def _run_waypoints(
     return PrimitiveResult(
         True, pose=waypoints[-1] if waypoints else None, details={"short_strokes": short}
     )
+
+
+def _coverage(start: np.ndarray, end: np.ndarray, target: np.ndarray) -> float:
+    """The share of the stroke start -> target that the hand covered, along its direction."""
+    d = np.asarray(target, float) - np.asarray(start, float)
+    n2 = float(d @ d)
+    if n2 < 1e-12:
+        return 1.0
+    return float((np.asarray(end, float) - start) @ d / n2)
 
 
 def periodic_action(
@@ -437,11 +458,13 @@ def periodic_action(
     periods: int = 3,
     speed: float = 0.05,
     tolerance: float = 0.01,
+    min_coverage: float = 1.0,
 ) -> PrimitiveResult:
     """Move g1 -> g1+D -> g1 -> g1-D -> g1, ``periods`` times; D = ``amplitude`` * direction.
-    A stroke may end up to ``tolerance`` off its target (the hose pulls on the hand)."""
+    A stroke may end up to ``tolerance`` off its target, or further when the hand covered at
+    least ``min_coverage`` of it (the hose pulls on the hand: ``_run_waypoints``)."""
     way = periodic_waypoints(g1, direction, amplitude, periods)
-    return _run_waypoints(robot, way, speed, "action", tolerance)
+    return _run_waypoints(robot, way, speed, "action", tolerance, min_coverage)
 
 
 def push(

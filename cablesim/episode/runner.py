@@ -377,7 +377,7 @@ def _act(robot: Robot, cfg: InteractionConfig, g1: Pose, u: np.ndarray) -> prim.
     a = cfg.actions
     if cfg.kind == "grasp":
         return prim.periodic_action(
-            robot, g1, u, a.amplitude, a.periods, a.speed, a.stroke_tolerance
+            robot, g1, u, a.amplitude, a.periods, a.speed, a.stroke_tolerance, a.min_stroke_coverage
         )
     return prim.push(robot, g1, u, cfg.push_depth, a.periods, a.speed, a.stroke_tolerance)
 
