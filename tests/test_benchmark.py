@@ -142,3 +142,17 @@ def test_grasp_and_clip_tables():
     assert c["dis"]["tau"] == 2.0 and c["dis"]["iou"] == pytest.approx(0.3)
     assert c["dis"]["epe"] == pytest.approx(1.0)
     assert "MfnProb FT" in "\n".join(rp.clip_markdown(c))
+
+
+def test_command_line_config_is_json_with_its_out_folder(tmp_path):
+    """``--out`` comes through the command line's path type; the config stays JSON."""
+    import json as _json
+
+    from cablesim.cli import build_parser
+    from cablesim.commands.benchmark import config_from_args
+
+    out = tmp_path / "bench"
+    args = build_parser().parse_args(["benchmark", "thesis", "--out", str(out)])
+    cfg = config_from_args(args)
+    assert cfg.out == str(out)
+    assert _json.loads(_json.dumps(cfg.to_dict()))["out"] == str(out)

@@ -85,7 +85,7 @@ def config_from_args(args: argparse.Namespace):
     if args.ray is not None:
         cfg.ray = args.ray
     if args.out is not None:
-        cfg.out = args.out
+        cfg.out = str(args.out)
     return cfg.validate()
 
 
