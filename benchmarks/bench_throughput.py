@@ -147,7 +147,7 @@ def report(meta: dict, rows: list[dict]) -> str:
         "",
         "Seeded episodes per minute with worker processes (`ProcessPoolExecutor`, spawn), one "
         "distinct seed per episode: scene from the settle cache, start segment, the default "
-        "interaction with ground truth, the default CPU perception (DIS medium + correlation).  "
+        "interaction with ground truth, the default CPU perception (DIS fine + refine + correlation).  "
         "The wall clock runs from starting the pool to the last result (worker start-up "
         "included).  `benchmarks/bench_throughput.py --write`.",
         "",
