@@ -176,6 +176,21 @@ def apply_scene_arguments(scene: SceneConfig, args: argparse.Namespace) -> Scene
     return scene
 
 
+def episode_config_from_args(args: argparse.Namespace) -> Any:
+    """The ``EpisodeConfig`` of ``episode`` and ``twin``: ``--config`` or the default, then the
+    seed, hose, scene and interaction flags that were given (not yet ``finish_config``-ed)."""
+    from cablesim.sim.session import EpisodeConfig
+
+    cfg = load_config(EpisodeConfig, args)
+    if getattr(args, "seed", None) is not None:
+        cfg.seed = args.seed
+    if getattr(args, "hose", None) is not None:
+        cfg.hose = args.hose
+    apply_scene_arguments(cfg.scene, args)
+    apply_interaction_arguments(cfg.interaction, args)
+    return cfg
+
+
 def apply_interaction_arguments(interaction: Any, args: argparse.Namespace) -> Any:
     if getattr(args, "periods", None) is not None:
         interaction.actions.periods = args.periods

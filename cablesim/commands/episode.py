@@ -25,11 +25,9 @@ import numpy as np
 from cablesim.commands._args import (
     add_interaction_arguments,
     add_scene_arguments,
-    apply_interaction_arguments,
-    apply_scene_arguments,
     check_settle_cache,
+    episode_config_from_args,
     finish_config,
-    load_config,
     output_path,
     prepare_output_dir,
     show_config,
@@ -59,14 +57,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> EpisodeConfig:
-    cfg = load_config(EpisodeConfig, args)
-    if args.seed is not None:
-        cfg.seed = args.seed
-    if args.hose is not None:
-        cfg.hose = args.hose
+    cfg = episode_config_from_args(args)
     cfg.progress = not args.quiet
-    apply_scene_arguments(cfg.scene, args)
-    apply_interaction_arguments(cfg.interaction, args)
     if args.push:
         cfg.interaction.kind = "push"
     return finish_config(cfg, args)

@@ -21,14 +21,11 @@ from pathlib import Path
 from cablesim.commands._args import (
     add_interaction_arguments,
     add_scene_arguments,
-    apply_interaction_arguments,
-    apply_scene_arguments,
+    episode_config_from_args,
     finish_config,
-    load_config,
     prepare_output_dir,
     show_config,
 )
-from cablesim.sim.session import EpisodeConfig
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -46,14 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from cablesim.twin.episode import sim_episode, twin_episode
     from cablesim.viz import errors_tile, overlay_votes, panel, write_png
 
-    cfg = load_config(EpisodeConfig, args)
-    if args.seed is not None:
-        cfg.seed = args.seed
-    if args.hose is not None:
-        cfg.hose = args.hose
-    apply_scene_arguments(cfg.scene, args)
-    apply_interaction_arguments(cfg.interaction, args)
-    cfg = finish_config(cfg, args)
+    cfg = finish_config(episode_config_from_args(args), args)
     if args.show_config:
         return show_config(cfg)
     out: Path = prepare_output_dir(args.out)
