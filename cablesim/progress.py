@@ -42,14 +42,15 @@ class Progress:
     @contextmanager
     def bar(self, total: int, desc: str, unit: str = "it") -> Iterator[Any]:
         """A tqdm progress bar on stderr for ``total`` steps (``update(n)``, ``set_postfix``),
-        disabled when the printer is; lines said meanwhile print above it."""
+        disabled when the printer is or stderr is not a terminal (a log file keeps the plain
+        lines); lines said meanwhile print above it."""
         from tqdm import tqdm
 
         bar = tqdm(
             total=total,
             desc=f"[{self.name}] {desc}",
             unit=unit,
-            disable=not self.enabled,
+            disable=True if not self.enabled else None,  # None: off where stderr is no TTY
             file=sys.stderr,
             dynamic_ncols=True,
             leave=True,
