@@ -7,7 +7,7 @@ import io
 from cablesim.progress import Progress
 
 
-def test_lines_print_while_a_bar_is_open_and_the_bar_counts():
+def test_lines_print_while_a_bar_is_open():
     buf = io.StringIO()
     say = Progress("t", True, stream=buf)
     with say.bar(3, "work") as bar:
