@@ -3,7 +3,8 @@
 franka-sim 1.1.7 needs mujoco 3.2 and numpy 1.26, which clash with this project's mujoco 4.0,
 so the server runs as a subprocess from its own environment: the Python named by
 ``$CABLESIM_FRANKA_SIM_PYTHON``, else ``.cache/franka-sim-venv/bin/python`` in the repository
-(see README "Real robot"), else this interpreter if it can import franka_sim.  The server is
+(see README "Real robot"), else this interpreter if it can import franka_sim; it is started by
+:class:`cablesim.twin.franka_sim.FrankaSimServer`, as the digital twin starts it.  The server is
 bound to 127.0.0.1 only (its command line binds all interfaces, so it is started from Python),
 on libfranka's fixed ports 1337 (arm) and 1338 (gripper); the tests skip when those are taken.
 Only loopback is ever contacted.  The server model is :func:`franka_sim_mjcf` (our Panda), with
@@ -14,12 +15,6 @@ from __future__ import annotations
 
 import gc
 import math
-import os
-import signal
-import socket
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -31,44 +26,12 @@ from cablesim.panda import HOME_QPOS, JOINT_LIMITS
 from cablesim.panda.ik import ArmModel
 from cablesim.panda.model import panda_spec
 from cablesim.robot.franky_panda import FLANGE_T_TCP, FrankyPanda, franka_sim_mjcf
+from cablesim.twin.franka_sim import HOST, FrankaSimServer, FrankaSimUnavailable
 
-HOST = "127.0.0.1"  # never anything else
-PORTS = (1337, 1338)  # libfranka's arm and gripper ports (fixed by the protocol)
 OBJECT_WIDTH = 0.02  # m: the server's virtual object between the fingers
-STARTUP_TIMEOUT = 60.0  # s
-STOP_TIMEOUT = 20.0  # s
 SERVER_LIFETIME = 300.0  # s: the server exits on its own after this, whatever happens here
-#: franka-sim judges the joint-side discontinuity of Cartesian commands on its own differential
-#: IK of each commanded pose; on this model that trips at the end of ordinary slow motions, so
-#: that one check is loosened (every other limit and reflex stays enforced).
-JOINT_DISCONTINUITY_SCALE = 3.0
-REPO = Path(__file__).resolve().parents[2]
-
-SERVER_SCRIPT = f"""
-import logging, os, signal, sys, threading
-logging.basicConfig(level=logging.INFO, stream=sys.stdout,
-                    format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-threading.Timer({SERVER_LIFETIME}, lambda: os._exit(3)).start()  # never outlive the tests
-from franka_sim import FrankaSimServer
-
-def _interrupt(*_):
-    raise KeyboardInterrupt
-
-signal.signal(signal.SIGTERM, _interrupt)
-server = FrankaSimServer(host="{HOST}", enable_vis=False, enable_gripper=True,
-                         gripper_object_width={OBJECT_WIDTH}, enforce_motion_limits=True,
-                         joint_discontinuity_scale={JOINT_DISCONTINUITY_SCALE})
-try:
-    server.start()
-except KeyboardInterrupt:
-    pass
-finally:
-    server.stop()
-    os._exit(0)
-"""
 
 
-# ---- without a server ------------------------------------------------------------------------
 def test_franka_sim_model_has_our_kinematics() -> None:
     """The server model's link7 frame is the flange: link7 * FLANGE_T_TCP is our TCP."""
     model = mujoco.MjModel.from_xml_string(franka_sim_mjcf())
@@ -108,85 +71,26 @@ def test_flange_t_tcp_is_the_hand_tcp() -> None:
 
 
 # ---- the franka-sim server -------------------------------------------------------------------
-def _server_python() -> str | None:
-    candidates = [os.environ.get("CABLESIM_FRANKA_SIM_PYTHON", "")]
-    candidates.append(str(REPO / ".cache" / "franka-sim-venv" / "bin" / "python"))
-    candidates.append(sys.executable)
-    for python in candidates:
-        if not python or not Path(python).exists():
-            continue
-        probe = subprocess.run(
-            [python, "-c", "import franka_sim.franka_sim_server"],
-            capture_output=True,
-            timeout=60,
-            check=False,
-        )
-        if probe.returncode == 0:
-            return python
-    return None
-
-
-def _ports_free() -> bool:
-    for port in PORTS:
-        for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
-            with socket.socket(socket.AF_INET, kind) as s:
-                try:
-                    s.bind((HOST, port))
-                except OSError:
-                    return False
-    return True
-
-
-def _stop(proc: subprocess.Popen[bytes]) -> None:
-    if proc.poll() is not None:
-        return
-    proc.send_signal(signal.SIGINT)
-    try:
-        proc.wait(STOP_TIMEOUT)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(5)
-
-
 @pytest.fixture(scope="module")
 def franka_sim_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
-    """A franka-sim server on 127.0.0.1:1337/1338 serving our Panda; yields its log path."""
+    """A franka-sim server on 127.0.0.1:1337/1338 serving our Panda (every motion limit and
+    reflex enforced; see ``FrankaSimServer`` for the one loosened check); yields its log."""
     pytest.importorskip("franky", reason="franky-control is not installed (the 'real' extra)")
-    python = _server_python()
-    if python is None:
-        pytest.skip(
-            "franka-sim is not installed: see README 'Real robot' "
-            "(.cache/franka-sim-venv or $CABLESIM_FRANKA_SIM_PYTHON)"
-        )
-    if not _ports_free():
-        pytest.skip(f"ports {PORTS} on {HOST} are in use (another franka-sim server?)")
-    tmp = tmp_path_factory.mktemp("franka_sim")
-    model = tmp / "panda.xml"
-    model.write_text(franka_sim_mjcf())
-    script = tmp / "serve.py"
-    script.write_text(SERVER_SCRIPT)
-    log = tmp / "server.log"
-    env = dict(os.environ, FR3_MJCF=str(model), MUJOCO_GL="egl")
-    with open(log, "wb") as out:
-        proc = subprocess.Popen(
-            [python, str(script)],
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            env=env,
-            cwd=tmp,
-            start_new_session=True,
-        )
+    server = FrankaSimServer(
+        object_width=OBJECT_WIDTH,
+        enforce_motion_limits=True,
+        lifetime=SERVER_LIFETIME,
+        workdir=tmp_path_factory.mktemp("franka_sim"),
+    )
     try:
-        deadline = time.monotonic() + STARTUP_TIMEOUT
-        while "Server ready for new client connection" not in log.read_text(errors="replace"):
-            if proc.poll() is not None:
-                pytest.fail(f"franka-sim exited ({proc.returncode}):\n{log.read_text()[-3000:]}")
-            if time.monotonic() > deadline:
-                pytest.fail(f"franka-sim did not start in {STARTUP_TIMEOUT} s")
-            time.sleep(0.1)
-        yield log
+        server.start()
+    except FrankaSimUnavailable as e:
+        pytest.skip(str(e))
+    try:
+        assert server.log is not None
+        yield server.log
     finally:
-        _stop(proc)
+        server.stop()
 
 
 def _yaw(angle: float, translation: tuple[float, float, float]) -> np.ndarray:
