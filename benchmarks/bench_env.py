@@ -34,7 +34,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
+from _machine import cpu_model, write_results  # noqa: E402  (benchmarks/ is on sys.path)
 
 import cablesim  # noqa: F401  (selects the headless GL back end)
 from cablesim.envs import HoseExploreConfig, HoseExploreEnv, aim_at_segment
@@ -156,9 +156,7 @@ def main() -> int:
                 f"| {r['median_step_s']:.2f} | {r['max_step_s']:.2f} | {r['success']:.0%} "
                 f"| {r['mean_reward']:.3f} |"
             )
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text("\n".join(lines) + "\n")
-        print(f"wrote {RESULTS}")
+        write_results(RESULTS, "\n".join(lines) + "\n")
     return 0
 
 

@@ -37,7 +37,7 @@ from cablesim.perception import (  # noqa: E402
 )
 
 H, W = 408, 552
-from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
+from _machine import cpu_model, write_results  # noqa: E402  (benchmarks/ is on sys.path)
 
 RESULTS = Path(__file__).resolve().parent / "results" / "perception.md"
 
@@ -337,9 +337,7 @@ def main() -> None:
     ]
     lines += [f"| {k} | {v:.2f} |" for k, v in refine.items()]
     lines.append("")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines))
-    print(f"wrote {args.out}", flush=True)
+    write_results(args.out, "\n".join(lines))
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ from _interaction import (  # noqa: E402
     uptime,
     versions_line,
 )
+from _machine import write_results  # noqa: E402
 
 single_thread_environment()
 
@@ -134,9 +135,7 @@ def main() -> int:
     text = report(meta, rows)
     print(text)
     if args.write:
-        RESULTS.parent.mkdir(parents=True, exist_ok=True)
-        RESULTS.write_text(text)
-        print(f"wrote {RESULTS}")
+        write_results(RESULTS, text)
     return 0 if same else 1
 
 
