@@ -19,6 +19,8 @@ from cablesim.panda.description import FORWARD_QPOS, HOME_QPOS, JOINT_LIMITS, MA
 from cablesim.panda.model import PandaNames, attach_panda, joint_qpos_addresses, robot_body_ids
 from cablesim.robot.pose import Pose
 
+_Q_LO, _Q_HI = np.asarray(JOINT_LIMITS, dtype=float).T  # arm joint limits, for clipping
+
 _PRIMITIVES = (
     mujoco.mjtGeom.mjGEOM_PLANE,
     mujoco.mjtGeom.mjGEOM_SPHERE,
@@ -181,8 +183,7 @@ class ArmModel:
         """Differential IK from ``q_init`` to ``target``; joint limits are respected (a
         ``q_init`` measured a hair outside them, as a real arm's can be, starts clipped)."""
         qpos = self.data.qpos.copy()
-        lo, hi = np.asarray(JOINT_LIMITS, dtype=float).T
-        qpos[self._arm_qadr] = np.clip(np.asarray(q_init, dtype=float), lo, hi)
+        qpos[self._arm_qadr] = np.clip(np.asarray(q_init, dtype=float), _Q_LO, _Q_HI)
         qpos[self._finger_qadr] = opening / 2.0
         self.configuration.update(qpos)
         posture = qpos.copy()
@@ -214,7 +215,7 @@ class ArmModel:
         else:
             err = self.frame_task.compute_error(self.configuration)
             pos_err, rot_err = float(np.linalg.norm(err[:3])), float(np.linalg.norm(err[3:]))
-        q = np.clip(self.configuration.q[self._arm_qadr], lo, hi)
+        q = np.clip(self.configuration.q[self._arm_qadr], _Q_LO, _Q_HI)
         converged = pos_err < self.position_tolerance and rot_err < self.rotation_tolerance
         return IKResult(q, converged, pos_err, rot_err, it)
 
