@@ -321,12 +321,19 @@ def compute_statistics(
         if refine is not None and refine.per_sample:
             pub_check = check if check is not None else SampleFilter(refine, target, est)
         for unit, phi in flows:
+            # each filter runs at most once per frame (the two kinds may share one)
+            checked = phi
+            if check is not None and (unit.index in cur or pub_check is check):
+                checked = check.apply(phi, unit.frame)
             if unit.index in cur:
-                feed_current(
-                    cur[unit.index], phi if check is None else check.apply(phi, unit.frame)
-                )
+                feed_current(cur[unit.index], checked)
             if unit.index in pub:
-                phi_pub = phi if pub_check is None else pub_check.apply(phi, unit.frame)
+                if pub_check is None:
+                    phi_pub = phi
+                elif pub_check is check:
+                    phi_pub = checked
+                else:
+                    phi_pub = pub_check.apply(phi, unit.frame)
                 pub_acc.update(pub[unit.index], phi_pub)
     pub_corr, pub_seg = pub_acc.results() if pub_acc is not None else ({}, {})
     actions = sorted(counts) if counts else sorted(set(pub_corr) | set(pub_seg))
