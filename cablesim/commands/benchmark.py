@@ -17,10 +17,9 @@ resumes), results/timings.jsonl, movingcables/ (the clips).  Defaults are the fu
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from cablesim.errors import ConfigError
+from cablesim.commands._args import load_config
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -58,13 +57,7 @@ def config_from_args(args: argparse.Namespace):
     from cablesim.benchmark import ThesisConfig
     from cablesim.jobs import parse_range
 
-    if args.config is not None:
-        try:
-            cfg = ThesisConfig.from_dict(json.loads(args.config.read_text()))
-        except (OSError, json.JSONDecodeError) as e:
-            raise ConfigError("--config", f"cannot read {args.config}: {e}") from e
-    else:
-        cfg = ThesisConfig()
+    cfg = load_config(ThesisConfig, args)
     for name in ("validation", "test", "clip_validation", "clip_test"):
         v = getattr(args, name)
         if v is not None:
