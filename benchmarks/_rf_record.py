@@ -6,7 +6,8 @@ masks captured (``capture.arm_masks``), ground truth on, the camera noise-free (
 models of :mod:`cablesim.sim.sensor` are applied to the recorded clean images when perception
 runs, so every noisy result has its noise-free twin on the very same interaction).  A scene
 whose interaction fails leaves ``<dir>.failed.json`` with the reason; a scene already recorded
-(or failed) is skipped, so the recording resumes where it stopped.
+(or failed) is skipped, so the recording resumes where it stopped.  A recording made before
+the runner's slip rule whose hose slipped during an action (:func:`slipped`) counts as failed.
 """
 
 from __future__ import annotations
@@ -51,10 +52,11 @@ class Scene:
         meta = self.path / "meta.json"
         if meta.exists():
             try:
-                if json.loads(meta.read_text()).get("complete"):
-                    return "ok"
+                doc = json.loads(meta.read_text())
             except (OSError, ValueError):
-                pass
+                return "todo"
+            if doc.get("complete"):
+                return "failed" if slipped(doc) else "ok"
         return "todo"
 
     def config(self):
@@ -70,6 +72,19 @@ class Scene:
             interaction=InteractionConfig(capture=CaptureConfig(arm_masks=True)),
             perturb=PerturbConfig(enabled=True),
         )
+
+
+def slipped(doc: dict) -> bool:
+    """Whether a recording made before the runner's slip rule (``grasp.min_follow_r2``, now
+    ``grasp_not_held``) shows a hose that slipped in the gripper during an action."""
+    from cablesim.episode.config import GraspConfig
+
+    r2_min = GraspConfig().min_follow_r2
+    actions = doc.get("meta", {}).get("result", {}).get("actions", [])
+    return any(
+        a.get("gain_r2") is not None and a["gain_r2"] == a["gain_r2"] and a["gain_r2"] < r2_min
+        for a in actions
+    )
 
 
 def record_scene(scene: Scene) -> tuple[Scene, str, float]:

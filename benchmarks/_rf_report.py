@@ -44,7 +44,8 @@ def render(rep: dict[str, Any]) -> str:
         "with the solid board, the hard case), one grasp interaction on the seeded start "
         "segment, two actions (along, across), K_p = 3, |D| = 2 cm, neighbouring hoses "
         "perturbed (`PerturbConfig(enabled=True)`), kinematic arm masks captured; the first "
-        "seeds whose interaction succeeds",
+        "seeds whose interaction succeeds (a hose that slipped in the gripper during an action, "
+        "follow R^2 < 0.9, is a failed interaction: `grasp.min_follow_r2`)",
         f"  - validation (tuning): wood seeds {sc['val_wood']}; solid seeds {sc['val_solid']}",
         f"  - test (never looked at while tuning): wood seeds {sc['test_wood']}; solid seeds "
         f"{sc['test_solid']}",

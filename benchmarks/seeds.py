@@ -83,6 +83,7 @@ def run_seed(
                 resamples=int(draws.get("resamples", 0)),
                 turned_down=[t.get("outcome") for t in draws.get("turned_down", [])],
                 frames=0 if r.stream is None else len(r.stream),
+                follow_r2=[float(a.gain_r2) for a in r.actions],
             )
             if r.stream is not None:
                 t = r.stream.target
@@ -144,7 +145,8 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         "One default interaction per seed (`cablesim episode --seed S`: 4 hoses, 640x480, hose of "
         "interest and start segment drawn from the seed; scene re-drawn by the session's "
         "documented rule when a draw does not settle or has no qualifying hose; a grasp that "
-        "does not hold is retried at neighbouring points).  "
+        "does not hold is retried at neighbouring points; a hose that slips in the gripper during an "
+        "action, follow R^2 < `grasp.min_follow_r2`, is `grasp_not_held`).  "
         f"`{meta['command']}`.",
         "",
         f"- date: {meta['date']}; commit {meta['commit']}",
@@ -164,15 +166,16 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         "",
         "## Per seed",
         "",
-        "| seed | success | outcome | hose | draw | re-draws | grasp retries | wall s | CPU s "
-        "| reason |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| seed | success | outcome | hose | draw | re-draws | grasp retries | follow R^2 | "
+        "wall s | CPU s | reason |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['seed']} | {'yes' if r.get('success') else 'no'} | {r['outcome']} | "
             f"{r.get('hose', '')} | {'' if r.get('draw') is None else r['draw']} | "
-            f"{r.get('resamples', 0)} | {r.get('grasp_retries', 0)} | {r['wall_s']:.1f} | "
+            f"{r.get('resamples', 0)} | {r.get('grasp_retries', 0)} | "
+            f"{' / '.join(f'{x:.3f}' for x in r.get('follow_r2', []))} | {r['wall_s']:.1f} | "
             f"{r['cpu_s']:.1f} | {_short(r.get('reason', ''))} |"
         )
     return "\n".join(lines) + "\n"

@@ -15,7 +15,9 @@ every kept frame.  A failure (unreachable, collision, slipping grasp, robot in v
 as ``InteractionResult(success=False, outcome=..., reason=...)``, ``outcome`` one of
 :data:`OUTCOMES`; only a diverging simulation or a lost connection raises.  A grasp that does
 not hold is retried at neighbouring points of the segment before the interaction fails
-(:func:`~cablesim.episode.primitives.grasp_at`); ``result.grasp_retries`` counts the retries.
+(:func:`~cablesim.episode.primitives.grasp_at`); ``result.grasp_retries`` counts the retries.  With ground truth, a hose that slips during an
+action (the grasped point follows the hand with R^2 below ``grasp.min_follow_r2``) is
+``grasp_not_held`` too.
 
 Nothing here is simulation-only: the robot, the camera and the clock are interfaces, and what
 only a simulator can measure (which hose the segment shows, follow gain, neighbour
@@ -318,6 +320,15 @@ def run_interaction(
         if not r:
             result.outcome = failure_outcome(r.reason, "action_failed")
             return _abort(result, robot, cfg, retreat_q, f"action {a} ({label}): {r.reason}", say)
+        if rep.gain_r2 < cfg.grasp.min_follow_r2:  # NaN (no truth, no samples) passes
+            result.outcome = "grasp_not_held"
+            why = (
+                f"action {a} ({label}): the grasped hose did not follow the hand (follow R^2 "
+                f"{rep.gain_r2:.2f} < {cfg.grasp.min_follow_r2}: it slipped in the gripper or "
+                f"was pulled loose; largest hose displacement "
+                f"{max(rep.hose_displacement, default=0.0) * 1000:.0f} mm)"
+            )
+            return _abort(result, robot, cfg, retreat_q, why, say)
     result.timings["actions"] = time.perf_counter() - t0
 
     # 4. release, out of view, wait until still, target frame
