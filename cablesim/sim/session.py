@@ -330,10 +330,10 @@ def simulate_episode(
         "scene_draws": draws,
     }
     if record_to is None:
-        result = session.interact(segment.mask, say=say)
+        result = _interact(session, segment.mask, say)
     else:
         with RecordingWriter(Path(record_to), meta=meta, overwrite=overwrite) as writer:
-            result = session.interact(segment.mask, sink=writer, say=say)
+            result = _interact(session, segment.mask, say, writer)
             final = dict(result.stream.meta) if result.stream is not None else {}
             final.update(meta, result=result.to_dict())
             writer.close(final, complete=result.success)
@@ -341,6 +341,16 @@ def simulate_episode(
     if result.stream is not None:
         result.stream.meta.update(meta)
     return SimulatedEpisode(result, segment, session, start_image, draws)
+
+
+def _interact(session: SimSession, mask: Any, say: Say, sink: Any = None) -> InteractionResult:
+    """The session's interaction; physics that diverged on the way (NaN, a MuJoCo warning, a
+    hose stretched apart: :meth:`World.check_diverged`) is the named outcome ``diverged``."""
+    try:
+        return session.interact(mask, sink=sink, say=say)
+    except PhysicsDivergedError as e:
+        say(f"interaction stopped: diverged: {e}")
+        return InteractionResult(False, reason=str(e), outcome="diverged", hose=session.hose)
 
 
 def choose_start(

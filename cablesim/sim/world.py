@@ -258,6 +258,8 @@ class World:
         T[:3, :3], T[:3, 3] = R, camera_pose.position
         self.T_world_camera = T
         self._warn_counts = np.zeros(len(_WARNINGS), int)
+        # rest length of every hose edge: a stretched edge is a blow-up (check_diverged)
+        self._edge_length0 = model.flexedge_length0.copy() if model.nflex else None
         self._settled_state: np.ndarray | None = None
         # Newton with CG standing in where Newton stalls (see PhysicsConfig and _advance)
         self._solver = int(model.opt.solver)
@@ -439,6 +441,18 @@ class World:
                 f"({', '.join(names) or 'non-finite state'}); try a smaller physics.timestep "
                 f"(now {self.model.opt.timestep}) or stiffer hose contacts"
             )
+        if self._edge_length0 is not None and len(self._edge_length0):
+            strain = np.abs(d.flexedge_length / self._edge_length0 - 1.0)
+            k = int(np.argmax(strain))
+            if strain[k] > self.cfg.physics.max_hose_strain:
+                m = self.model
+                flex = int(np.searchsorted(m.flex_edgeadr, k, side="right") - 1)
+                raise PhysicsDivergedError(
+                    f"physics diverged at t={d.time:.3f}s: hose {flex} edge "
+                    f"{k - int(m.flex_edgeadr[flex])} stretched {strain[k]:.0%} (limit "
+                    f"physics.max_hose_strain {self.cfg.physics.max_hose_strain:g}; its "
+                    "edges stretch by 1 % at rest, up to ~16 % pulled taut by the gripper)"
+                )
 
     # ------------------------------------------------------------------ state
     def get_state(self) -> np.ndarray:
