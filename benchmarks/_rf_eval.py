@@ -163,6 +163,9 @@ FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {
     "dis-fine-gd12": lambda s: DISFlow(
         "medium", finest_scale=1, patch_size=8, patch_stride=4, gradient_descent_iters=12
     ),
+    "dis-fine-vr10": lambda s: DISFlow(
+        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=10
+    ),
     "dis-medium-board1.5": lambda s: RegionFlow(
         DISFlow("medium"), FlowRegion.from_crop(board_crop(s.scene, s.stream.intrinsics), 1.5)
     ),

@@ -1,0 +1,239 @@
+"""Where the physics time of one default interaction goes: steps, solver and iterations per
+phase, and what MuJoCo's constraint solver does in the states where Newton stalls.
+
+    .venv/bin/python benchmarks/bench_solver.py [--seed 2] [--timestep 0.004] [--write]
+
+Part 1 runs one default interaction (no perception) and counts, per phase (approach and grasp,
+each action, release, retreat), the physics steps, which solver ran them (Newton, or CG
+standing in after a Newton step that hit its iteration limit: ``cablesim.sim.world``), the
+mean solver iterations and the CPU time per step.  Part 2 saves the states in which Newton
+stalled during the actions and re-solves each of them once per solver option: iterations
+until convergence (100 = the limit, not converged) and CPU ms per step.  ``--timestep``
+compares another physics timestep (its scene is settled anew, so it is a different scene
+state; the follow gains are reported).  ``--write`` writes ``benchmarks/results/solver.md``.
+The machine is shared: iteration counts are exact, times are indicative.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _interaction import (  # noqa: E402
+    git_commit,
+    machine_line,
+    single_thread_environment,
+    uptime,
+    versions_line,
+)
+from _machine import write_results  # noqa: E402
+
+single_thread_environment()
+
+import argparse  # noqa: E402
+import datetime  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+import cablesim  # noqa: E402, F401  (selects the headless GL back end; mujoco after it)
+
+RESULTS = Path(__file__).parent / "results" / "solver.md"
+PHASES = ("grasp_at", "periodic_action", "release", "retreat")
+SOLVER_NAMES = {0: "PGS", 1: "CG", 2: "Newton"}
+#: solver options tried on the stalled states: name -> {mjOption field: value}
+OPTIONS: dict[str, dict[str, float]] = {
+    "Newton, sparse (default)": {},
+    "Newton, tolerance 1e-6": {"tolerance": 1e-6},
+    "Newton, 100 line-search iterations": {"ls_iterations": 100},
+    "Newton, dense Jacobian": {"jacobian": 0},
+    "Newton, pyramidal cone": {"cone": 0},
+    "Newton, 300 iterations": {"iterations": 300},
+    "CG (the fallback)": {"solver": 1},
+}
+
+
+def run(seed: int, timestep: float) -> dict:
+    import mujoco
+
+    import cablesim.episode.primitives as prim
+    import cablesim.sim.world as world_mod
+    from cablesim.config import override
+    from cablesim.sim.session import EpisodeConfig, SimSession
+
+    cfg = override(EpisodeConfig(seed=seed), f"scene.physics.timestep={timestep}")
+    session = SimSession.build(cfg)
+    segment = session.pick_start()
+    hose = session.hose
+    session = SimSession.build(cfg, world=session.world, camera=session.camera)
+    session.hose = hose
+    w = session.world
+    m, d = w.model, w.data
+    state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_CTRL
+    phase = ["other"]
+    steps: dict[tuple[str, int], list[float]] = {}
+    stalled: list[np.ndarray] = []
+    step_fn = mujoco.mj_step
+
+    def counted_step(m_, d_, *a):
+        solver = int(m_.opt.solver)
+        c = time.process_time()
+        step_fn(m_, d_, *a)
+        c = time.process_time() - c
+        s = steps.setdefault((phase[0], solver), [0, 0.0, 0])
+        s[0] += 1
+        s[1] += c
+        s[2] += int(d_.solver_niter[: max(1, d_.nisland)].max())
+
+    advance = w._advance  # noqa: SLF001
+
+    def watched_advance():
+        if phase[0] == "periodic_action" and w._fallback_steps == 0 and len(stalled) < 40:  # noqa: SLF001
+            st = np.empty(mujoco.mj_stateSize(m, state_spec))
+            mujoco.mj_getState(m, d, st, state_spec)
+            before = w.solver_fallbacks
+            advance()
+            if w.solver_fallbacks > before:
+                stalled.append(st)
+            return
+        advance()
+
+    originals = {n: getattr(prim, n) for n in PHASES}
+
+    def in_phase(name):
+        def wrapped(*a, **k):
+            phase[0] = name
+            try:
+                return originals[name](*a, **k)
+            finally:
+                phase[0] = "other"
+
+        return wrapped
+
+    world_mod.mujoco.mj_step = counted_step
+    w._advance = watched_advance  # noqa: SLF001
+    for n in PHASES:
+        setattr(prim, n, in_phase(n))
+    try:
+        c0 = time.process_time()
+        res = session.interact(segment.mask)
+        cpu = time.process_time() - c0
+    finally:
+        world_mod.mujoco.mj_step = step_fn
+        w._advance = advance  # noqa: SLF001
+        for n, f in originals.items():
+            setattr(prim, n, f)
+    trials = []
+    if stalled:
+        base = {
+            k: getattr(m.opt, k)
+            for k in ("tolerance", "ls_iterations", "jacobian", "cone", "iterations", "solver")
+        }
+        for name, opts in OPTIONS.items():
+            for k, v in {"solver": 2, **opts}.items():
+                setattr(m.opt, k, type(getattr(m.opt, k))(v))
+            its = []
+            c = time.process_time()
+            for st in stalled:
+                mujoco.mj_setState(m, d, st, state_spec)
+                mujoco.mj_step(m, d)
+                its.append(int(d.solver_niter[: max(1, d.nisland)].max()))
+            ms = 1e3 * (time.process_time() - c) / len(stalled)
+            limit = int(m.opt.iterations)
+            for k, v in base.items():
+                setattr(m.opt, k, v)
+            trials.append(
+                {
+                    "option": name,
+                    "median_iterations": float(np.median(its)),
+                    "not_converged": sum(i >= limit for i in its),
+                    "ms_per_step": ms,
+                }
+            )
+    session.close()
+    return {
+        "seed": seed,
+        "timestep": timestep,
+        "success": bool(res.success),
+        "cpu_s": cpu,
+        "gains": [a.gain for a in res.actions],
+        "fallbacks": w.solver_fallbacks,
+        "steps": {f"{p}/{SOLVER_NAMES.get(s, s)}": v for (p, s), v in sorted(steps.items())},
+        "stalled": len(stalled),
+        "trials": trials,
+    }
+
+
+def report(runs: list[dict], meta: dict) -> str:
+    lines = [
+        "# Solver benchmark: where the physics time of one interaction goes",
+        "",
+        "`benchmarks/bench_solver.py --write`: one default interaction (no perception), physics "
+        "steps per phase and solver, then the states where Newton stalled during the actions "
+        "re-solved with other solver options.",
+        "",
+        f"- date: {meta['date']}; cablesim commit {meta['commit']}",
+        f"- machine: {meta['machine']}; {meta['versions']}",
+        f"- load (shared machine), start `{meta['load_start']}`, end `{meta['load_end']}`: "
+        "times are indicative, iteration counts exact",
+        "",
+    ]
+    for r in runs:
+        lines += [
+            f"## Seed {r['seed']}, timestep {r['timestep'] * 1000:g} ms",
+            "",
+            f"Interaction {'ok' if r['success'] else 'FAILED'}, {r['cpu_s']:.1f} s CPU "
+            f"(physics, control, rendering, ground truth); follow gain "
+            f"{', '.join(f'{g:.3f}' for g in r['gains'])}; {r['fallbacks']} Newton steps redone "
+            "with CG (each starts 1 s of CG).",
+            "",
+            "| phase / solver | steps | mean iterations | CPU ms per step | CPU s |",
+            "|---|---|---|---|---|",
+        ]
+        for k, (n, c, it) in r["steps"].items():
+            lines.append(f"| {k} | {n} | {it / n:.1f} | {1e3 * c / n:.2f} | {c:.2f} |")
+        if r["trials"]:
+            lines += [
+                "",
+                f"{r['stalled']} states in which Newton stalled during the actions, each "
+                "re-solved once per option (limit 100 iterations unless stated):",
+                "",
+                "| option | median iterations | not converged | CPU ms per step |",
+                "|---|---|---|---|",
+            ]
+            for t in r["trials"]:
+                lines.append(
+                    f"| {t['option']} | {t['median_iterations']:.0f} | "
+                    f"{t['not_converged']}/{r['stalled']} | {t['ms_per_step']:.2f} |"
+                )
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seed", type=int, default=2)
+    ap.add_argument("--timestep", type=float, action="append", help="default: 0.004")
+    ap.add_argument("--write", action="store_true")
+    args = ap.parse_args()
+    load_start = uptime()
+    runs = [run(args.seed, dt) for dt in (args.timestep or [0.004])]
+    meta = {
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "commit": git_commit(),
+        "machine": machine_line(),
+        "versions": versions_line(),
+        "load_start": load_start,
+        "load_end": uptime(),
+    }
+    text = report(runs, meta)
+    print(text)
+    if args.write:
+        write_results(RESULTS, text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
