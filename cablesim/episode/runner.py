@@ -56,7 +56,8 @@ OUTCOMES: dict[str, str] = {
     "unreachable": "the grasp, its pre-grasp, an action end point or the path there is out of "
     "reach (IK, joint limits, a collision the arm model's check predicts)",
     "collision": "a motion stopped on a contact in the scene (board, table, a coupling)",
-    "grasp_not_held": "the fingers closed on nothing or the hose slipped, after every retry",
+    "grasp_not_held": "the fingers closed on nothing or the hose slipped, after every retry; "
+    "with ground truth also a grasped hose that did not follow the hand during an action",
     "action_failed": "an action stroke ended off its target (the hose held the hand back)",
     "release_failed": "the gripper did not open",
     "retreat_failed": "the arm could not move out of view",
@@ -64,7 +65,8 @@ OUTCOMES: dict[str, str] = {
     # simulation: the scene before any interaction (see cablesim.sim.session)
     "scene_unsettled": "no scene draw settled (cablesim.errors.SceneUnsettledError)",
     "no_graspable_segment": "no scene draw had a hose of interest with a graspable segment",
-    "diverged": "the physics diverged (cablesim.errors.PhysicsDivergedError)",
+    "diverged": "the physics diverged (cablesim.errors.PhysicsDivergedError): NaN, a MuJoCo "
+    "warning, or a hose edge stretched past physics.max_hose_strain",
 }
 
 
