@@ -1,7 +1,8 @@
 """Where the physics time of one default interaction goes: steps, solver and iterations per
 phase, and what MuJoCo's constraint solver does in the states where Newton stalls.
 
-    .venv/bin/python benchmarks/bench_solver.py [--seed 2] [--timestep 0.004] [--write]
+    .venv/bin/python benchmarks/bench_solver.py [--seed 2] [--timestep 0.004]
+        [--replay SEED:T ...] [--write]
 
 Part 1 runs one default interaction (no perception) and counts, per phase (approach and grasp,
 each action, release, retreat), the physics steps, which solver ran them (Newton, or CG
@@ -10,7 +11,10 @@ mean solver iterations and the CPU time per step.  Part 2 saves the states in wh
 stalled during the actions and re-solves each of them once per solver option: iterations
 until convergence (100 = the limit, not converged) and CPU ms per step.  ``--timestep``
 compares another physics timestep (its scene is settled anew, so it is a different scene
-state; the follow gains are reported).  ``--write`` writes ``benchmarks/results/solver.md``.
+state; the follow gains are reported).  ``--replay SEED:T`` (part 3) saves the state of seed
+SEED's default interaction at T s, a little before a blow-up, and steps on from it with each
+solver setting of ``REPLAY_SOLVERS``: the largest hose stretch says which setting tears the
+hose.  ``--write`` writes ``benchmarks/results/solver.md``.
 The machine is shared: iteration counts are exact, times are indicative.
 """
 
@@ -166,6 +170,113 @@ def run(seed: int, timestep: float) -> dict:
     }
 
 
+#: solver settings a replay compares: name -> (solver: 1 CG / 2 Newton, iterations, dense)
+REPLAY_SOLVERS: dict[str, tuple[int, int, bool]] = {
+    "CG, 100 iterations (the fallback)": (1, 100, False),
+    "CG, 1000 iterations": (1, 1000, False),
+    "Newton, sparse (the default)": (2, 100, False),
+    "Newton, dense Jacobian": (2, 100, True),
+}
+
+
+def replay(seed: int, t_save: float, duration: float) -> dict:
+    """Run the default interaction of ``seed`` (stretch check off) up to ``t_save`` s of
+    simulated time, save the state, and step ``duration`` s from it once per solver setting
+    of :data:`REPLAY_SOLVERS`: the largest hose edge stretch and the solver's iterations."""
+    import mujoco
+
+    from cablesim.config import override
+    from cablesim.sim.session import EpisodeConfig, SimSession
+
+    cfg = override(EpisodeConfig(seed=seed), "scene.physics.max_hose_strain=10.0")
+    session = SimSession.build(cfg)
+    segment = session.pick_start()
+    w = session.world
+    m, d = w.model, w.data
+    spec = (
+        mujoco.mjtState.mjSTATE_FULLPHYSICS
+        | mujoco.mjtState.mjSTATE_CTRL
+        | mujoco.mjtState.mjSTATE_EQ_ACTIVE
+    )
+    saved: dict = {}
+
+    class _Saved(Exception):
+        pass
+
+    advance = w._advance  # noqa: SLF001
+
+    def watched() -> None:
+        advance()
+        if d.time >= t_save:
+            saved["state"] = np.empty(mujoco.mj_stateSize(m, spec))
+            mujoco.mj_getState(m, d, saved["state"], spec)
+            saved["solver"] = SOLVER_NAMES.get(int(m.opt.solver), m.opt.solver)
+            raise _Saved
+
+    w._advance = watched  # noqa: SLF001
+    try:
+        session.interact(segment.mask)
+    except _Saved:
+        pass
+    finally:
+        w._advance = advance  # noqa: SLF001
+    rows = []
+    if saved:
+        length0 = m.flexedge_length0.copy()
+        base = (m.opt.solver, m.opt.iterations, m.opt.jacobian)
+        for name, (solver, iterations, dense) in REPLAY_SOLVERS.items():
+            mujoco.mj_setState(m, d, saved["state"], spec)
+            m.opt.solver, m.opt.iterations = solver, iterations
+            if dense:
+                m.opt.jacobian = 0
+            stretch, its = 0.0, []
+            for _ in range(round(duration / m.opt.timestep)):
+                mujoco.mj_step(m, d)
+                its.append(int(d.solver_niter[: max(1, d.nisland)].max()))
+                stretch = max(stretch, float(np.abs(d.flexedge_length / length0 - 1).max()))
+            m.opt.solver, m.opt.iterations, m.opt.jacobian = base
+            rows.append(
+                {
+                    "solver": name,
+                    "max_stretch": stretch,
+                    "median_iterations": float(np.median(its)),
+                    "at_limit": float(np.mean(np.asarray(its) >= iterations)),
+                }
+            )
+    session.close()
+    return {
+        "seed": seed,
+        "t": float(t_save),
+        "duration": duration,
+        "running": saved.get("solver"),
+        "rows": rows,
+    }
+
+
+def report_replays(replays: list[dict]) -> list[str]:
+    lines = [
+        "## Blow-ups replayed",
+        "",
+        "Seeds whose default interaction tore a hose (`benchmarks/results/seeds.md`, outcome "
+        "`diverged`): the state a little before the runaway is saved and stepped on with each "
+        "solver setting (`--replay SEED:T`).  A hose edge stretches by ~1 % at rest and up to "
+        "~16 % when an action pulls a taut hose; 50 % is the divergence limit.",
+        "",
+        "| seed, from t (s), solver running there | solver setting | max stretch | median "
+        "iterations | steps at the iteration limit |",
+        "|---|---|---|---|---|",
+    ]
+    for r in replays:
+        for row in r["rows"]:
+            lines.append(
+                f"| {r['seed']}, {r['t']:.2f} + {r['duration']:.1f} s, {r['running']} | "
+                f"{row['solver']} | {row['max_stretch']:.0%} | {row['median_iterations']:.0f} | "
+                f"{row['at_limit']:.0%} |"
+            )
+    lines.append("")
+    return lines
+
+
 def report(runs: list[dict], meta: dict) -> str:
     lines = [
         "# Solver benchmark: where the physics time of one interaction goes",
@@ -216,10 +327,22 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=2)
     ap.add_argument("--timestep", type=float, action="append", help="default: 0.004")
+    ap.add_argument(
+        "--replay",
+        action="append",
+        default=[],
+        metavar="SEED:T",
+        help="replay the default interaction of SEED from T s with each solver setting",
+    )
+    ap.add_argument("--replay-duration", type=float, default=0.3)
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
     load_start = uptime()
     runs = [run(args.seed, dt) for dt in (args.timestep or [0.004])]
+    replays = []
+    for spec in args.replay:
+        seed, _, t = spec.partition(":")
+        replays.append(replay(int(seed), float(t), args.replay_duration))
     meta = {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "commit": git_commit(),
@@ -229,6 +352,8 @@ def main() -> int:
         "load_end": uptime(),
     }
     text = report(runs, meta)
+    if replays:
+        text += "\n" + "\n".join(report_replays(replays))
     print(text)
     if args.write:
         write_results(RESULTS, text)
