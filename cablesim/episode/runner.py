@@ -15,9 +15,9 @@ every kept frame.  A failure (unreachable, collision, slipping grasp, robot in v
 as ``InteractionResult(success=False, outcome=..., reason=...)``, ``outcome`` one of
 :data:`OUTCOMES`; only a diverging simulation or a lost connection raises.  A grasp that does
 not hold is retried at neighbouring points of the segment before the interaction fails
-(:func:`~cablesim.episode.primitives.grasp_at`); ``result.grasp_retries`` counts the retries.  With ground truth, a hose that slips during an
-action (the grasped point follows the hand with R^2 below ``grasp.min_follow_r2``) is
-``grasp_not_held`` too.
+(:func:`~cablesim.episode.primitives.grasp_at`); ``result.grasp_retries`` counts the retries.
+With ground truth, a hose that slips during an action (the grasped point follows the hand with
+R^2 below ``grasp.min_follow_r2``) is ``grasp_not_held`` too.
 
 Nothing here is simulation-only: the robot, the camera and the clock are interfaces, and what
 only a simulator can measure (which hose the segment shows, follow gain, neighbour

@@ -258,8 +258,10 @@ class World:
         T[:3, :3], T[:3, 3] = R, camera_pose.position
         self.T_world_camera = T
         self._warn_counts = np.zeros(len(_WARNINGS), int)
-        # rest length of every hose edge: a stretched edge is a blow-up (check_diverged)
-        self._edge_length0 = model.flexedge_length0.copy() if model.nflex else None
+        # rest length of every hose edge: a stretched edge is a blow-up (check_diverged);
+        # an edge of zero rest length (none in a hose) is left out
+        length0 = model.flexedge_length0.copy()
+        self._edge_length0 = np.where(length0 > 0, length0, np.inf) if len(length0) else None
         self._settled_state: np.ndarray | None = None
         # Newton with CG standing in where Newton stalls (see PhysicsConfig and _advance)
         self._solver = int(model.opt.solver)
@@ -441,8 +443,9 @@ class World:
                 f"({', '.join(names) or 'non-finite state'}); try a smaller physics.timestep "
                 f"(now {self.model.opt.timestep}) or stiffer hose contacts"
             )
-        if self._edge_length0 is not None and len(self._edge_length0):
+        if self._edge_length0 is not None:
             strain = np.abs(d.flexedge_length / self._edge_length0 - 1.0)
+            strain[np.isinf(self._edge_length0)] = 0.0
             k = int(np.argmax(strain))
             if strain[k] > self.cfg.physics.max_hose_strain:
                 m = self.model
