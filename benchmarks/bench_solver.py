@@ -89,7 +89,7 @@ def run(seed: int, timestep: float) -> dict:
         s = steps.setdefault((phase[0], solver), [0, 0.0, 0])
         s[0] += 1
         s[1] += c
-        s[2] += int(d_.solver_niter[: max(1, d_.nisland)].max())
+        s[2] += w.solver_iterations()
 
     advance = w._advance  # noqa: SLF001
 
@@ -143,7 +143,7 @@ def run(seed: int, timestep: float) -> dict:
             for st in stalled:
                 mujoco.mj_setState(m, d, st, state_spec)
                 mujoco.mj_step(m, d)
-                its.append(int(d.solver_niter[: max(1, d.nisland)].max()))
+                its.append(w.solver_iterations())
             ms = 1e3 * (time.process_time() - c) / len(stalled)
             limit = int(m.opt.iterations)
             for k, v in base.items():
@@ -222,7 +222,6 @@ def replay(seed: int, t_save: float, duration: float) -> dict:
         w._advance = advance  # noqa: SLF001
     rows = []
     if saved:
-        length0 = m.flexedge_length0.copy()
         base = (m.opt.solver, m.opt.iterations, m.opt.jacobian)
         for name, (solver, iterations, dense) in REPLAY_SOLVERS.items():
             mujoco.mj_setState(m, d, saved["state"], spec)
@@ -232,8 +231,8 @@ def replay(seed: int, t_save: float, duration: float) -> dict:
             stretch, its = 0.0, []
             for _ in range(round(duration / m.opt.timestep)):
                 mujoco.mj_step(m, d)
-                its.append(int(d.solver_niter[: max(1, d.nisland)].max()))
-                stretch = max(stretch, float(np.abs(d.flexedge_length / length0 - 1).max()))
+                its.append(w.solver_iterations())
+                stretch = max(stretch, float(w.hose_stretch().max()))
             m.opt.solver, m.opt.iterations, m.opt.jacobian = base
             rows.append(
                 {

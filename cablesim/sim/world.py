@@ -260,8 +260,9 @@ class World:
         self._warn_counts = np.zeros(len(_WARNINGS), int)
         # rest length of every hose edge: a stretched edge is a blow-up (check_diverged);
         # an edge of zero rest length (none in a hose) is left out
-        length0 = model.flexedge_length0.copy()
-        self._edge_length0 = np.where(length0 > 0, length0, np.inf) if len(length0) else None
+        length0 = model.flexedge_length0
+        self._edge_length0 = np.where(length0 > 0, length0, 1.0)
+        self._zero_rest_edges = np.flatnonzero(length0 <= 0)
         self._settled_state: np.ndarray | None = None
         # Newton with CG standing in where Newton stalls (see PhysicsConfig and _advance)
         self._solver = int(model.opt.solver)
@@ -399,7 +400,7 @@ class World:
             return
         mujoco.mj_getState(m, d, self._step_state, _STATE)
         mujoco.mj_step(m, d)
-        if d.solver_niter[: max(1, d.nisland)].max() < m.opt.iterations:
+        if self.solver_iterations() < m.opt.iterations:
             return
         mujoco.mj_setState(m, d, self._step_state, _STATE)
         m.opt.solver = _SOLVERS["CG"]
@@ -409,6 +410,18 @@ class World:
         self._fallback_steps -= 1
         if self._fallback_steps == 0:
             m.opt.solver = self._solver
+
+    def solver_iterations(self) -> int:
+        """Iterations the constraint solver took in the last step (the most of any island)."""
+        d = self.data
+        return int(d.solver_niter[: max(1, d.nisland)].max())
+
+    def hose_stretch(self) -> np.ndarray:
+        """|length / rest length - 1| of every flex edge now (0 for an edge of zero rest
+        length): about 0.01 at rest, past ``physics.max_hose_strain`` a blow-up."""
+        strain = np.abs(self.data.flexedge_length / self._edge_length0 - 1.0)
+        strain[self._zero_rest_edges] = 0.0
+        return strain
 
     @property
     def solver_fallbacks(self) -> int:
@@ -443,9 +456,8 @@ class World:
                 f"({', '.join(names) or 'non-finite state'}); try a smaller physics.timestep "
                 f"(now {self.model.opt.timestep}) or stiffer hose contacts"
             )
-        if self._edge_length0 is not None:
-            strain = np.abs(d.flexedge_length / self._edge_length0 - 1.0)
-            strain[np.isinf(self._edge_length0)] = 0.0
+        if len(self._edge_length0):
+            strain = self.hose_stretch()
             k = int(np.argmax(strain))
             if strain[k] > self.cfg.physics.max_hose_strain:
                 m = self.model
