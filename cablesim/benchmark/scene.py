@@ -30,6 +30,7 @@ import numpy as np
 
 from cablesim.dataset.generate import failure, outcome_of, scene_from
 from cablesim.errors import CablesimError
+from cablesim.errors import outcome_of as error_outcome
 
 CODE_DIRS = ("sim", "episode", "panda")  # the code that decides a simulated stream
 
@@ -118,7 +119,7 @@ def simulate_stream(params: dict[str, Any], use_cache: bool = True) -> tuple[Any
                     "follow_gain": [a.gain for a in res.actions],
                 }
     except CablesimError as e:  # the scene itself (did not settle, diverged, ...)
-        info = failure(str(e), type(e).__name__)
+        info = failure(str(e), error_outcome(e))
         res = None
     finally:
         if session is not None:
@@ -210,7 +211,7 @@ def run_exploration(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     try:
         res = explore(cfg)
     except CablesimError as e:
-        return failure(str(e), type(e).__name__)
+        return failure(str(e), error_outcome(e))
     ok = res.successes
     out: dict[str, Any] = {
         "hose": res.hose,

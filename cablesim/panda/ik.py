@@ -20,6 +20,8 @@ from cablesim.panda.model import PandaNames, attach_panda, joint_qpos_addresses,
 from cablesim.robot.pose import Pose
 
 _Q_LO, _Q_HI = np.asarray(JOINT_LIMITS, dtype=float).T  # arm joint limits, for clipping
+_HOSE_BIT = 4  # contype of the hose capsules; only the arm links have it in their conaffinity
+_PARKED = (0.0, 0.0, -10.0)  # where unused hose capsules wait, far below the table
 
 _PRIMITIVES = (
     mujoco.mjtGeom.mjGEOM_PLANE,
@@ -117,6 +119,8 @@ class ArmModel:
         position_tolerance: float = 5e-4,
         rotation_tolerance: float = 5e-3,
         max_iterations: int = 60,
+        hose_capsules: Sequence[float] = (),
+        hose_radius: float = 0.01,
     ):
         spec = mujoco.MjSpec()
         self.base = Pose(np.asarray(base_pos, dtype=float), np.asarray(base_quat, dtype=float))
@@ -131,6 +135,16 @@ class ArmModel:
             )
             g.contype, g.conaffinity, g.group = 1, 1, 3
         self.obstacle_names = tuple(ob.name for ob in obstacles)
+        # movable capsules for the hoses (set_hoses), each on a mocap body (the world body's
+        # bounding volumes are computed once, at compile time): only the arm links collide
+        for k, half in enumerate(hose_capsules):
+            body = spec.worldbody.add_body(name=f"hose/{k}", mocap=True, pos=list(_PARKED))
+            g = body.add_geom(
+                name=f"hose/{k}",
+                type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                size=[hose_radius, float(half), 0],
+            )
+            g.contype, g.conaffinity, g.group = _HOSE_BIT, 0, 3
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         self.position_tolerance = position_tolerance
@@ -152,6 +166,17 @@ class ArmModel:
         # Robot-robot pairs generate contacts here (the broadphase filters on body masks too).
         m.geom_conaffinity[self._robot_geoms] = 3
         m.body_conaffinity[robot] |= 2
+        # the links (not the hand and fingers, which reach into the hoses to grasp) see the
+        # hose capsules
+        links = [m.body(n).id for n in self.names.bodies[:8]]
+        self._link_geoms = np.isin(m.geom_bodyid, links)
+        m.geom_conaffinity[self._link_geoms] |= _HOSE_BIT
+        m.body_conaffinity[links] |= _HOSE_BIT
+        self._hose_geoms = np.array([m.geom(f"hose/{k}").id for k in range(len(hose_capsules))])
+        self._hose_mocap = np.array(
+            [m.body_mocapid[m.body(f"hose/{k}").id] for k in range(len(hose_capsules))], int
+        )
+        self._hose_of_geom = np.full(m.ngeom, -1)
 
         self.configuration = mink.Configuration(m)
         self.frame_task = mink.FrameTask(
@@ -159,6 +184,61 @@ class ArmModel:
         )
         self.posture_task = mink.PostureTask(m, cost=1e-3)
         self.limits = [mink.ConfigurationLimit(m, gain=0.5)]
+
+    # ---- hoses ---------------------------------------------------------------------------
+    @property
+    def hose_capacity(self) -> int:
+        """How many hose segments :meth:`set_hoses` can take."""
+        return len(self._hose_mocap)
+
+    def set_hoses(self, polylines: Sequence[np.ndarray] = ()) -> None:
+        """Make the hoses obstacles for the arm links: the segments of the polylines (V, 3), in
+        world coordinates and in order, take the capsules given at construction (their radius
+        and half-lengths: the hoses' rest geometry), each centred on its segment and along it.
+        The hand and the fingers do not see them (they reach in among the hoses to grasp).  No
+        polylines: no hose obstacles.
+
+        A joint path or a line that starts with a link already touching a hose is not failed
+        for that link and hose (it may be moving away); any other link-hose contact fails it."""
+        d = self.data
+        starts = [np.asarray(p, dtype=float)[:-1] for p in polylines]
+        ends = [np.asarray(p, dtype=float)[1:] for p in polylines]
+        n = sum(len(a) for a in starts)
+        if n > len(self._hose_mocap):
+            raise ValueError(f"{n} hose segments, the arm model holds {len(self._hose_mocap)}")
+        d.mocap_pos[self._hose_mocap] = _PARKED
+        d.mocap_quat[self._hose_mocap] = (1.0, 0.0, 0.0, 0.0)
+        self._hose_of_geom[:] = -1
+        if n:
+            a, b = np.concatenate(starts), np.concatenate(ends)
+            seg = b - a
+            u = seg / np.maximum(np.linalg.norm(seg, axis=1), 1e-12)[:, None]
+            # the rotation taking z to u: axis z x u, w = 1 + z.u (z -> -z: about x)
+            quat = np.stack([1.0 + u[:, 2], -u[:, 1], u[:, 0], np.zeros(n)], axis=1)
+            quat[quat[:, 0] < 1e-9] = (0.0, 1.0, 0.0, 0.0)
+            quat /= np.linalg.norm(quat, axis=1)[:, None]
+            d.mocap_pos[self._hose_mocap[:n]] = 0.5 * (a + b)
+            d.mocap_quat[self._hose_mocap[:n]] = quat
+            owner = [np.full(len(x), h) for h, x in enumerate(starts)]
+            self._hose_of_geom[self._hose_geoms[:n]] = np.concatenate(owner)
+
+    def _hose_contacts(self, q: np.ndarray, opening: float) -> set[tuple[int, int]]:
+        """(link geom, hose) pairs in contact at ``q``."""
+        if not (self._hose_of_geom >= 0).any():
+            return set()
+        m, d = self.model, self.data
+        self.set_q(q, opening)
+        mujoco.mj_collision(m, d)
+        out = set()
+        for c in d.contact[: d.ncon]:
+            g1, g2 = int(c.geom[0]), int(c.geom[1])
+            if c.dist >= 0 or g1 < 0 or g2 < 0:
+                continue
+            if self._hose_of_geom[g2] >= 0:
+                out.add((g1, int(self._hose_of_geom[g2])))
+            elif self._hose_of_geom[g1] >= 0:
+                out.add((g2, int(self._hose_of_geom[g1])))
+        return out
 
     # ---- kinematics --------------------------------------------------------------------------
     def set_q(self, q: np.ndarray, opening: float | None = None) -> None:
@@ -228,9 +308,14 @@ class ArmModel:
         return ""
 
     def collisions(
-        self, q: np.ndarray, opening: float = 0.08, min_distance: float = 0.0
+        self,
+        q: np.ndarray,
+        opening: float = 0.08,
+        min_distance: float = 0.0,
+        ignore: set[tuple[int, int]] = frozenset(),  # type: ignore[assignment]
     ) -> list[tuple[str, str, float]]:
-        """Robot-obstacle and robot self-collision pairs (names, distance) at ``q``."""
+        """Robot-obstacle and robot self-collision pairs (names, distance) at ``q``;
+        ``ignore`` holds (link geom, hose) pairs that do not count (see :meth:`set_hoses`)."""
         m, d = self.model, self.data
         self.set_q(q, opening)
         mujoco.mj_collision(m, d)
@@ -248,6 +333,9 @@ class ArmModel:
                 robot_geom = g1 if r1 else g2
                 if m.geom_bodyid[robot_geom] == self._base_body:
                     continue  # the base stands on the table
+                hose = int(self._hose_of_geom[g2 if r1 else g1])
+                if hose >= 0 and (robot_geom, hose) in ignore:
+                    continue
             else:
                 continue
             out.append((m.geom(g1).name, m.geom(g2).name, float(c.dist)))
@@ -303,6 +391,7 @@ class ArmModel:
         n = max(1, math.ceil(dist / spacing), math.ceil(angle / angle_step))
         q = np.asarray(q_start, dtype=float)
         plan = [q]
+        touching = self._hose_contacts(q, opening)
         for i in range(1, n + 1):
             s = i / n
             r = self.solve(start.interpolate(target, s), q, q, opening)
@@ -313,7 +402,7 @@ class ArmModel:
                 )
             if np.max(np.abs(r.q - q)) > max_joint_jump:
                 return [], f"IK jumped between branches {where} (near a singularity or limit)"
-            problem = self.check(r.q, opening)
+            problem = self.check(r.q, opening, touching)
             if problem:
                 return [], f"{problem} {where}"
             q = r.q
@@ -331,18 +420,25 @@ class ArmModel:
             return f"joint limit: {problem}"
         q0 = np.asarray(q_start, dtype=float)
         n = max(1, math.ceil(np.max(np.abs(q_target - q0)) / step))
+        touching = self._hose_contacts(q0, opening)
         for i in range(1, n + 1):
-            problem = self.check(q0 + (q_target - q0) * i / n, opening)
+            problem = self.check(q0 + (q_target - q0) * i / n, opening, touching)
             if problem:
                 return f"{problem} at {100 * i / n:.0f}% of the joint path"
         return ""
 
-    def check(self, q: np.ndarray, opening: float = 0.08) -> str:
-        """Empty string if ``q`` is within limits and collision-free, else the reason."""
+    def check(
+        self,
+        q: np.ndarray,
+        opening: float = 0.08,
+        ignore: set[tuple[int, int]] = frozenset(),  # type: ignore[assignment]
+    ) -> str:
+        """Empty string if ``q`` is within limits and collision-free (but for the ``ignore``
+        link-hose pairs), else the reason."""
         reason = self.limit_violation(q)
         if reason:
             return f"joint limit: {reason}"
-        hits = self.collisions(q, opening)
+        hits = self.collisions(q, opening, ignore=ignore)
         if hits:
             a, b, dist = hits[0]
             return f"collision: {a} with {b} (penetration {-dist * 1000:.1f} mm)"
@@ -369,9 +465,14 @@ class ArmModelChecks:
     def _reachable(
         self, pose: Pose, seeds: Sequence[np.ndarray] | None
     ) -> tuple[bool, str, IKResult | None]:
+        self._update_obstacles()
         if seeds is None:
             seeds = self.arm.seeds(pose, self.joint_positions)
         return self.arm.reach(pose, seeds, self._opening_for_checks())
+
+    def _update_obstacles(self) -> None:
+        """Bring the arm model's movable obstacles up to date (none here; the simulated arm
+        sets the hoses)."""
 
     def _opening_for_checks(self) -> float:
         """The finger opening the collision checks assume (fully open when it is unknown)."""

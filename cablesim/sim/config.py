@@ -450,6 +450,15 @@ class PhysicsConfig:
     # (test seed 702 with perturbed neighbours) went 1 % -> 55 % -> 100 % in 8 steps and tore
     # the hoses apart, with no NaN and no MuJoCo warning
     max_hose_strain: float = 0.5
+    # a step that leaves a hose edge stretched by more than this is redone, and the next
+    # ``rescue_time`` s are stepped, by Newton on a dense Jacobian (World._advance): in the
+    # taut-hose states that tore hoses (seeds 6015, 6032, 6064, 6079) CG at its iteration cap
+    # and the sparse Newton stop short of the solution and the stretch runs away; the dense
+    # Newton converges there in a few iterations, at 16 ms per step instead of ~2.  0 turns
+    # it off.  Must lie between the largest stretch of normal pulling (~16 %) and
+    # ``max_hose_strain``.
+    rescue_strain: float = 0.2
+    rescue_time: float = 0.5
 
     def validate(self) -> None:
         check_fields(self, "physics.")
@@ -464,6 +473,14 @@ class PhysicsConfig:
         check_number("physics.settle_max_time", self.settle_max_time, hi=600.0)
         check_number("physics.gravity", self.gravity, -100.0, 100.0)
         check_number("physics.max_hose_strain", self.max_hose_strain, 1e-4, 10.0)
+        check_positive("physics.rescue_strain", self.rescue_strain, allow_zero=True)
+        check_positive("physics.rescue_time", self.rescue_time)
+        if self.rescue_strain >= self.max_hose_strain:
+            raise ConfigError(
+                "physics.rescue_strain",
+                f"must be below physics.max_hose_strain ({self.max_hose_strain:g}), "
+                f"got {self.rescue_strain}",
+            )
 
 
 @dataclass

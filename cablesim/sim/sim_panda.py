@@ -39,7 +39,9 @@ _KV_OVER_KP = 0.1
 
 
 class SimWorld(Protocol):
-    """What :class:`SimPanda` needs from the simulated world."""
+    """What :class:`SimPanda` needs from the simulated world.  A world that also has
+    ``hoses``, ``cfg.hoses.radius`` and ``hose_vertices(i)`` (``cablesim.sim.world.World``) gets
+    its hoses planned around (``SimPandaConfig.avoid_hoses``)."""
 
     model: mujoco.MjModel
     data: mujoco.MjData
@@ -64,6 +66,10 @@ class SimPandaConfig:
     grasp_timeout: float = 1.5  # s
     grasp_vertex_distance: float = 0.03  # m, equality mode: max TCP to vertex distance
     grasp_mode: Literal["friction", "equality"] = "friction"
+    # plan the arm links (not the hand) around the hoses while the gripper is open, keeping
+    # ``hose_clearance`` m from their surface (see SimPanda._update_obstacles)
+    avoid_hoses: bool = True
+    hose_clearance: float = 0.005
 
     def __post_init__(self) -> None:
         if self.grasp_mode not in ("friction", "equality"):
@@ -73,6 +79,8 @@ class SimPandaConfig:
         for name in ("position_tolerance", "waypoint_spacing", "settle_time", "grasp_timeout"):
             if getattr(self, name) <= 0:
                 raise ConfigError(name, "must be > 0")
+        if not 0 <= self.hose_clearance <= 0.1:
+            raise ConfigError("hose_clearance", f"must be in [0, 0.1] m, got {self.hose_clearance}")
 
 
 def _interpolate(plan: np.ndarray, s: float, duration: float) -> tuple[np.ndarray, np.ndarray]:
@@ -131,7 +139,19 @@ class SimPanda(ArmModelChecks, Robot):
                 m.geom_bodyid[g]
             ] == 0
         base_pos, base_quat = world.panda_base
-        self.arm = ArmModel(base_pos, base_quat, obstacles)
+        capsules: list[float] = []  # half rest length of every hose edge
+        hoses = getattr(world, "hoses", ()) if self.config.avoid_hoses else ()
+        for h in hoses:
+            capsules += [0.5 * h.spec.length / (h.n_vertices - 1)] * (h.n_vertices - 1)
+        radius = world.cfg.hoses.radius if hoses else 0.0
+        self.arm = ArmModel(
+            base_pos,
+            base_quat,
+            obstacles,
+            hose_capsules=capsules,
+            hose_radius=radius + self.config.hose_clearance,
+        )
+        self._closed = False  # the fingers were closed (grasp) and not opened since
         self._vertex_bodies = np.unique(m.flex_vertbodyid[m.flex_vertbodyid > 0])
         self.last_plan: list[np.ndarray] = []
 
@@ -153,8 +173,23 @@ class SimPanda(ArmModelChecks, Robot):
         return float(self.world.model.opt.timestep)
 
     # ---- planning ----------------------------------------------------------------------------
+    def _update_obstacles(self) -> None:
+        """The hoses as they are now become obstacles for the arm links in the arm model
+        (``config.avoid_hoses``), while the gripper is open: a joint motion planned against the
+        board alone swept link6 through a hose and crushed it until the physics tore it apart
+        (seeds 6062, 6077).  Holding a hose, the arm drags it wherever it goes: no hose
+        obstacles then."""
+        if not self.arm.hose_capacity:
+            return
+        if self._closed:
+            self.arm.set_hoses()
+            return
+        w = self.world
+        self.arm.set_hoses([w.hose_vertices(i) for i in range(len(w.hoses))])
+
     def plan_line(self, target: Pose) -> tuple[list[np.ndarray], str]:
         """Joint waypoints along the straight TCP line to ``target``; empty list + reason on failure."""
+        self._update_obstacles()
         cfg = self.config
         return self.arm.plan_line(
             self.ee_pose(),
@@ -183,6 +218,7 @@ class SimPanda(ArmModelChecks, Robot):
         if not 0 < speed_factor <= 1:
             return MoveResult(False, f"speed_factor must be in (0, 1], got {speed_factor}")
         q0 = self.joint_positions
+        self._update_obstacles()
         problem = self.arm.check_joint_path(q0, q, self.gripper_opening)
         if problem:
             return MoveResult(False, problem)
@@ -256,6 +292,7 @@ class SimPanda(ArmModelChecks, Robot):
 
     # ---- gripper -----------------------------------------------------------------------------
     def open(self, width: float = MAX_OPENING, speed: float = 0.1) -> bool:
+        self._closed = False
         self._set_equality(False)
         width = float(np.clip(width, 0.0, MAX_OPENING))
         self._drive_gripper(width, speed)
@@ -270,6 +307,7 @@ class SimPanda(ArmModelChecks, Robot):
         epsilon_outer: float = 0.01,
     ) -> bool:
         set_grasp_force(self.world.model, self.names, force)
+        self._closed = True
         self._drive_gripper(0.0, speed)
         opening = self.gripper_opening
         held = width - epsilon_inner <= opening <= width + epsilon_outer and opening > 0.002

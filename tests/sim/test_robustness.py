@@ -369,3 +369,76 @@ def test_a_blow_up_during_the_interaction_is_the_outcome_diverged() -> None:
         assert "stretched" in ep.result.reason and ep.result.stream is None
     finally:
         ep.close()
+
+
+def test_the_simulated_arm_plans_around_the_hoses_while_the_gripper_is_open() -> None:
+    """``SimPanda`` hands the hoses as they are now to its arm model before it plans (one
+    capsule per hose edge, centred on it); with the fingers closed on a hose it drags the
+    hoses along, so there are none."""
+    session = SimSession.build(small(2, hoses=2))
+    try:
+        robot, world = session.robot, session.world
+        robot._update_obstacles()
+        arm = robot.arm
+        assert arm.hose_capacity == sum(h.n_vertices - 1 for h in world.hoses)
+        arm.set_q(robot.joint_positions)
+        k = 0
+        for i in range(len(world.hoses)):
+            v = world.hose_vertices(i)
+            for a, b in zip(v[:-1], v[1:], strict=True):
+                g = arm.model.geom(f"hose/{k}").id
+                np.testing.assert_allclose(arm.data.geom_xpos[g], 0.5 * (a + b), atol=1e-9)
+                assert arm.model.geom_size[g, 0] > world.cfg.hoses.radius
+                k += 1
+        robot.grasp()
+        robot._update_obstacles()
+        arm.set_q(robot.joint_positions)
+        assert (arm.data.geom_xpos[arm._hose_geoms, 2] < -5).all()
+        robot.open()
+        robot._update_obstacles()
+        arm.set_q(robot.joint_positions)
+        assert (arm.data.geom_xpos[arm._hose_geoms, 2] > -1).all()
+    finally:
+        session.close()
+
+
+def test_a_stretched_hose_is_stepped_by_newton_on_a_dense_jacobian() -> None:
+    """A step that leaves a hose edge stretched past ``physics.rescue_strain`` is redone from
+    the same state by Newton on a dense Jacobian, which goes on for ``physics.rescue_time``;
+    then the configured solver is back.  (Here the threshold is set below the ~0.1 % stretch
+    of this scene's hoses at rest so that the very next step triggers it.)"""
+    import mujoco
+
+    from cablesim.errors import ConfigError
+
+    session = SimSession.build(small(2, hoses=2))
+    try:
+        world = session.world
+        m, d = world.model, world.data
+        solver, jacobian = int(m.opt.solver), int(m.opt.jacobian)
+        world.step(2)
+        assert world.solver_rescues == 0  # a hose at rest is far below 20 %
+        state = world.get_state()
+        # what the dense Newton makes of this state
+        m.opt.solver, m.opt.jacobian = mujoco.mjtSolver.mjSOL_NEWTON, mujoco.mjtJacobian.mjJAC_DENSE
+        mujoco.mj_step(m, d)
+        expected = d.qpos.copy()
+        m.opt.solver, m.opt.jacobian = solver, jacobian
+        world.set_state(state)
+        physics = world.cfg.physics
+        physics.rescue_strain, physics.rescue_time = 1e-4, 5 * m.opt.timestep
+        world.step(1)
+        assert world.solver_rescues == 1
+        np.testing.assert_array_equal(d.qpos, expected)
+        assert m.opt.jacobian == mujoco.mjtJacobian.mjJAC_DENSE
+        world.step(4)  # the rest of the rescue time
+        assert (int(m.opt.solver), int(m.opt.jacobian)) == (solver, jacobian)
+        assert world.solver_rescues == 1
+        world.step(1)  # still stretched past 0.01 %: a new rescue
+        assert world.solver_rescues == 2
+        world.reset()
+        assert world.solver_rescues == 0 and int(m.opt.jacobian) == jacobian
+        with pytest.raises(ConfigError, match="physics.rescue_strain"):
+            PhysicsConfig(rescue_strain=0.6).validate()
+    finally:
+        session.close()
