@@ -85,6 +85,9 @@ def run_seed(
                 frames=0 if r.stream is None else len(r.stream),
                 follow_r2=[float(a.gain_r2) for a in r.actions],
             )
+            if ep.session is not None:  # how often the solver needed help (cablesim.sim.world)
+                row["rescues"] = int(ep.session.world.solver_rescues)
+                row["fallbacks"] = int(ep.session.world.solver_fallbacks)
             if r.stream is not None:
                 t = r.stream.target
                 h = hashlib.sha256(np.ascontiguousarray(t.rgb).tobytes())
@@ -127,6 +130,7 @@ def summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "turned_down_draws": dict(
             Counter(o for r in rows for o in r.get("turned_down", []) if o).most_common()
         ),
+        "seeds_with_rescues": sum(1 for r in rows if r.get("rescues", 0) > 0),
         "cpu_s_median": statistics.median(cpu) if cpu else None,
         "cpu_s_total": sum(cpu),
     }
@@ -163,19 +167,22 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         f"- outcomes: {outcomes}",
         f"- grasp retries: {retries}",
         f"- scene re-draws (resamples): {resamples}; turned-down draws: {turned}",
+        f"- seeds where a stretched hose was stepped by the dense Newton (`physics."
+        f"rescue_strain`): {s['seeds_with_rescues']}",
         "",
         "## Per seed",
         "",
         "| seed | success | outcome | hose | draw | re-draws | grasp retries | follow R^2 | "
-        "wall s | CPU s | reason |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "rescues | wall s | CPU s | reason |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['seed']} | {'yes' if r.get('success') else 'no'} | {r['outcome']} | "
             f"{r.get('hose', '')} | {'' if r.get('draw') is None else r['draw']} | "
             f"{r.get('resamples', 0)} | {r.get('grasp_retries', 0)} | "
-            f"{' / '.join(f'{x:.3f}' for x in r.get('follow_r2', []))} | {r['wall_s']:.1f} | "
+            f"{' / '.join(f'{x:.3f}' for x in r.get('follow_r2', []))} | "
+            f"{r.get('rescues', '')} | {r['wall_s']:.1f} | "
             f"{r['cpu_s']:.1f} | {_short(r.get('reason', ''))} |"
         )
     return "\n".join(lines) + "\n"
