@@ -550,6 +550,18 @@ def tune(stats: Sequence[StreamStatistics], truths: Sequence[np.ndarray], method
 
 
 def union_mask(st: StreamStatistics, method: str, pr: dict[str, float]) -> np.ndarray:
+    """The union (>= 1 vote) mask at the thresholds ``pr``; with ``st.grow`` each action's
+    mask grows along the colour first, as ``masks_from_statistics`` does."""
+    if st.grow is not None and st.guide is not None:
+        from cablesim.perception.refine import grow_by_colour
+
+        out = np.zeros(st.shape, bool)
+        for a in st.actions:
+            one = type(st)(**{**st.__dict__, "actions": [a]})
+            one.grow = None
+            m = union_mask(one, method, pr)
+            out |= grow_by_colour(m, st.guide, st.grow, st.support)
+        return out
     if method == "correlation":
         return _union_score(st, method, pr["c0_min"]) > pr["r2_min"]
     if method == "segmentation":

@@ -19,6 +19,7 @@ from cablesim.config import Config, check_fields, check_int
 from cablesim.errors import ConfigError
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.grasp_sampler import GraspSamplerParams
+from cablesim.perception.refine import DEFAULT_REFINE, GrowParams, RefineParams
 from cablesim.perception.segmentation import SegmentationParams
 from cablesim.sim.perturb import PerturbConfig
 from cablesim.sim.session import EpisodeConfig
@@ -53,6 +54,9 @@ class ExploreConfig(Config):
     merge: str = "dis"
     merged_votes: int = 1  # a pixel is in the merged mask with at least this many votes
     front_filter: bool = True  # keep the front-most part (depth) of a proposed segment
+    # grow each mask along the target frame's colour (``cablesim.perception.refine.GrowParams``
+    # colour, CIELAB distance); None: off (the default: it relies on distinctly coloured hoses)
+    grow_colour: float | None = None
     random_tries: int = 30  # random baseline: voted pixels tried per proposal
     width: int | None = None  # image size; None = the scene's camera (640x480)
     height: int | None = None
@@ -72,6 +76,13 @@ class ExploreConfig(Config):
         if self.method is not None:
             return self.method
         return "segmentation" if self.kind == "push" else "correlation"
+
+    def refine(self) -> RefineParams:
+        """The bleed remedies of the perception (``cablesim.perception.refine``): the default
+        ones, with the colour growth when ``grow_colour`` is set."""
+        if self.grow_colour is None:
+            return DEFAULT_REFINE
+        return dataclasses.replace(DEFAULT_REFINE, grow=GrowParams(colour=self.grow_colour))
 
     def episode_config(self) -> EpisodeConfig:
         """The simulated session: the scene of ``seed`` at the chosen image size, the
@@ -113,6 +124,8 @@ class ExploreConfig(Config):
             raise ConfigError("max_attempts", f"must be >= grasps ({self.grasps})")
         if self.merged_votes < 1:
             raise ConfigError("merged_votes", "must be >= 1")
+        if self.grow_colour is not None and not 0 < self.grow_colour <= 255:
+            raise ConfigError("grow_colour", f"must be in (0, 255] or None, got {self.grow_colour}")
         check_int("max_attempts", self.max_attempts, 1, 100)
         check_int("random_tries", self.random_tries, 1)
         for name in ("width", "height"):

@@ -453,7 +453,13 @@ class Exploration:
         res, cfg = self.result, self.cfg
         target = stream.target
         t0 = time.perf_counter()
-        seg = segment_stream(stream, method=cfg.resolved_method, flow=self.flow, params=self.params)
+        seg = segment_stream(
+            stream,
+            method=cfg.resolved_method,
+            flow=self.flow,
+            params=self.params,
+            refine=cfg.refine(),
+        )
         inter.timings["perception"] = time.perf_counter() - t0
         truth = self.ev.stream_truth(stream) if self.ev is not None else None
         inter.seg, inter.target_rgb, inter.target_depth = seg, target.rgb, target.depth

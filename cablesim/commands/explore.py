@@ -68,6 +68,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="vote carrying between targets: dis (default), oracle (ground truth), none",
     )
+    p.add_argument(
+        "--grow-colour",
+        type=float,
+        default=None,
+        metavar="LAB",
+        help="grow the masks along the target's colour within this CIELAB distance (off; "
+        "helps only where the hoses differ in colour)",
+    )
     p.add_argument("--perturb", action="store_true", help="disturb neighbouring hoses in actions")
     p.add_argument("--record", action="store_true", help="record every interaction (sim)")
     add_interaction_arguments(p)
@@ -96,7 +104,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def config_from_args(args: argparse.Namespace) -> ExploreConfig:
     """``ExploreConfig()`` or ``--config FILE``, then the flags given, then ``--set``."""
     cfg = load_config(ExploreConfig, args, "explore")
-    for name in ("seed", "hose", "strategy", "method", "flow", "merge"):
+    for name in ("seed", "hose", "strategy", "method", "flow", "merge", "grow_colour"):
         if getattr(args, name) is not None:
             setattr(cfg, name, getattr(args, name))
     if args.grasps is not None:

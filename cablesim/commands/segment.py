@@ -25,6 +25,7 @@ Files in --out:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -37,8 +38,14 @@ from cablesim.errors import InputError, RecordingError
 from cablesim.jsonutil import json_default
 from cablesim.perception.frames import Stream
 from cablesim.perception.metrics import BETAS, score_mask
-from cablesim.perception.pipeline import METHODS, params_for_beta, segment_stream
+from cablesim.perception.pipeline import (
+    METHODS,
+    PUBLISHED_METHODS,
+    params_for_beta,
+    segment_stream,
+)
 from cablesim.perception.published import PUBLISHED_THRESHOLDS
+from cablesim.perception.refine import DEFAULT_REFINE, GrowParams, RefineParams
 from cablesim.viz import colour_map, hstack, label, overlay_votes, write_png
 
 FLOWS = ("dis", "farneback", "raft", "oracle")
@@ -80,6 +87,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="compute flow on this crop (default: the sequence's own, if any)",
     )
     p.add_argument("--scale", type=float, help="scale the crop by this factor for the flow")
+    p.add_argument(
+        "--grow-colour",
+        type=float,
+        default=None,
+        metavar="LAB",
+        help="grow the masks along the target's colour within this CIELAB distance (off; "
+        "correlation, segmentation, ablation; helps only where the hoses differ in colour)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
@@ -166,6 +181,19 @@ def _region(args: argparse.Namespace) -> Any:
     )
 
 
+def _refine(args: argparse.Namespace) -> RefineParams | None:
+    """The default remedies, with the colour growth of ``--grow-colour``."""
+    if args.grow_colour is None:
+        return None
+    if args.method in PUBLISHED_METHODS:
+        raise InputError(
+            f"--grow-colour applies to correlation, segmentation and ablation, not {args.method!r}"
+        )
+    if not 0 < args.grow_colour <= 255:
+        raise InputError(f"--grow-colour must be in (0, 255], got {args.grow_colour}")
+    return dataclasses.replace(DEFAULT_REFINE, grow=GrowParams(colour=args.grow_colour))
+
+
 def _pictures(out: Path, stream: Stream, seg: Any, truth: np.ndarray | None, title: str) -> None:
     rgb = stream.target.rgb
     n = max(len(seg.masks), 1)
@@ -195,10 +223,11 @@ def run(args: argparse.Namespace) -> int:
     truth = _truth(args, stream)
     flow = _flow(args, stream)
     params = params_for_beta(args.method, args.beta)
+    refine = _refine(args)
     if not args.quiet:
         print(f"[segment] {layout} {args.sequence}: {len(stream)} frames, actions {stream.actions}")
     t1 = time.time()
-    seg = segment_stream(stream, args.method, flow, params, region=_region(args))
+    seg = segment_stream(stream, args.method, flow, params, region=_region(args), refine=refine)
     t2 = time.time()
     out.mkdir(parents=True, exist_ok=True)
     np.save(out / "votes.npy", seg.votes)

@@ -27,7 +27,7 @@ import numpy as np
 from cablesim.episode.config import ActionConfig, GraspConfig, InteractionConfig, RetreatConfig
 from cablesim.panda.description import RETRACT_QPOS
 from cablesim.robot.base import MoveResult, Robot
-from cablesim.robot.grasping import move_joints_safely
+from cablesim.robot.grasping import avoiding_hoses, move_joints_safely
 from cablesim.robot.pose import Pose, grasp_pose
 
 #: The default approach: the hand points at the board (world +x); the board normal is -x.
@@ -272,11 +272,24 @@ def grasp_at(
     neighbouring point of the segment ``k * cfg.retry_shift`` along its axis, alternating
     sides (``rng``, the ``grasp_retry`` stream in simulation, picks the first side; without
     one, +axis first).  A neighbouring point that is out of reach is skipped.  A grasp that is
-    unreachable before any motion is not retried.  ``details["retries"]`` counts the
+    unreachable before any motion is not retried.  The arm links are planned around the hoses
+    throughout (:func:`~cablesim.robot.grasping.avoiding_hoses`).  ``details["retries"]`` counts the
     re-approaches made, ``details["attempts"]`` lists each attempt's offset and result and
     ``details["moved"]`` says whether the arm moved at all.
     """
-    cfg = cfg or GraspConfig()
+    with avoiding_hoses(robot):
+        return _grasp_at(robot, centre, axis, cfg or GraspConfig(), approach, hose_point, rng)
+
+
+def _grasp_at(
+    robot: Robot,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    cfg: GraspConfig,
+    approach: Sequence[float],
+    hose_point: Callable[[Pose], HosePointProbe | None] | None,
+    rng: np.random.Generator | None,
+) -> PrimitiveResult:
     app = _unit(approach)
     along = _unit(axis)
     side = 1.0 if rng is None else float(rng.choice((-1.0, 1.0)))
@@ -493,7 +506,18 @@ def approach_for_push(
     standoff: float = 0.02,
 ) -> PrimitiveResult:
     """Close the gripper and bring it to ``standoff`` in front of the hose point."""
-    cfg = cfg or GraspConfig()
+    with avoiding_hoses(robot):
+        return _approach_for_push(robot, centre, axis, cfg or GraspConfig(), approach, standoff)
+
+
+def _approach_for_push(
+    robot: Robot,
+    centre: np.ndarray,
+    axis: np.ndarray,
+    cfg: GraspConfig,
+    approach: Sequence[float],
+    standoff: float,
+) -> PrimitiveResult:
     app = _unit(approach)
     g, why = choose_grasp_pose(robot, centre, axis, app, cfg.pregrasp_offset)
     if g is None:

@@ -177,6 +177,9 @@ class ArmModel:
             [m.body_mocapid[m.body(f"hose/{k}").id] for k in range(len(hose_capsules))], int
         )
         self._hose_of_geom = np.full(m.ngeom, -1)
+        # the hose capsules count only while this is set (cablesim.robot.grasping.avoiding_hoses:
+        # the approach to a grasp or push; retreats and parking may brush a hose)
+        self.avoid_hoses = False
 
         self.configuration = mink.Configuration(m)
         self.frame_task = mink.FrameTask(
@@ -196,7 +199,7 @@ class ArmModel:
         world coordinates and in order, take the capsules given at construction (their radius
         and half-lengths: the hoses' rest geometry), each centred on its segment and along it.
         The hand and the fingers do not see them (they reach in among the hoses to grasp).  No
-        polylines: no hose obstacles.
+        polylines: no hose obstacles.  They count only while ``avoid_hoses`` is set.
 
         A joint path or a line that starts with a link already touching a hose is not failed
         for that link and hose (it may be moving away); any other link-hose contact fails it."""
@@ -224,7 +227,7 @@ class ArmModel:
 
     def _hose_contacts(self, q: np.ndarray, opening: float) -> set[tuple[int, int]]:
         """(link geom, hose) pairs in contact at ``q``."""
-        if not (self._hose_of_geom >= 0).any():
+        if not self.avoid_hoses or not (self._hose_of_geom >= 0).any():
             return set()
         m, d = self.model, self.data
         self.set_q(q, opening)
@@ -334,7 +337,7 @@ class ArmModel:
                 if m.geom_bodyid[robot_geom] == self._base_body:
                     continue  # the base stands on the table
                 hose = int(self._hose_of_geom[g2 if r1 else g1])
-                if hose >= 0 and (robot_geom, hose) in ignore:
+                if hose >= 0 and (not self.avoid_hoses or (robot_geom, hose) in ignore):
                     continue
             else:
                 continue

@@ -11,7 +11,9 @@ Every flow passes the per-sample checks of ``refine`` (:mod:`cablesim.perception
 arm masks, optionally a photometric or forward-backward check; a rejected pixel gets no sample
 in that frame) and only the target pixels of ``StreamStatistics.support`` (the arm's absence,
 optionally the depth foreground) may vote: the remedies against motion bleeding across hose
-boundaries.  ``refine=None`` means :data:`~cablesim.perception.refine.DEFAULT_REFINE`.
+boundaries.  ``refine=None`` means :data:`~cablesim.perception.refine.DEFAULT_REFINE`.  With
+``RefineParams.grow`` the masks of the current methods then grow along the target frame's
+colour (an option: it relies on the hoses differing in colour).
 
 :func:`segment_stream` turns the statistics into per-action masks and a vote image for one
 method (``"correlation"``, ``"segmentation"`` or ``"ablation"``, or the published code's
@@ -61,7 +63,15 @@ from cablesim.perception.published import (
     plan_published,
 )
 from cablesim.perception.published import describe as describe_published
-from cablesim.perception.refine import DEFAULT_REFINE, RefineParams, SampleFilter, support_mask
+from cablesim.perception.refine import (
+    DEFAULT_REFINE,
+    GrowParams,
+    RefineParams,
+    SampleFilter,
+    colour_guide,
+    grow_by_colour,
+    support_mask,
+)
 from cablesim.perception.segmentation import (
     SegmentationAccumulator,
     SegmentationParams,
@@ -112,6 +122,10 @@ class StreamStatistics:
     # default they stay the published code's)
     published_support: np.ndarray | None = None
     refine: dict[str, Any] = field(default_factory=dict)
+    # colour growth of the current methods' masks (``RefineParams.grow``): the parameters and
+    # the target frame in CIELAB (``cablesim.perception.refine.colour_guide``); None: off
+    grow: GrowParams | None = None
+    guide: np.ndarray | None = None
 
 
 @dataclass
@@ -356,6 +370,8 @@ def compute_statistics(
             support_mask(target, refine) if want_pub and refine is not None else None
         ),
         refine=rp.describe(),
+        grow=rp.grow,
+        guide=colour_guide(target.rgb) if rp.grow is not None else None,
     )
 
 
@@ -369,6 +385,8 @@ def masks_from_statistics(
     support = stats.published_support if method in PUBLISHED_METHODS else stats.support
     if support is not None:
         masks = {a: m & support for a, m in masks.items()}
+    if method not in PUBLISHED_METHODS and stats.grow is not None and stats.guide is not None:
+        masks = {a: grow_by_colour(m, stats.guide, stats.grow, support) for a, m in masks.items()}
     return masks
 
 

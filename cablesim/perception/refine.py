@@ -32,6 +32,17 @@ Per pixel of the target frame, once per interaction (``support``: pixels allowed
 - **contrast** (``contrast``, :class:`ContrastParams`): a hose pixel differs in colour from
   the board around it: max-channel distance to the median colour of a window several hose
   widths wide.
+
+Per mask, after thresholding (``grow``, :class:`GrowParams`; off by default):
+
+- **colour growth**: a hose has one colour along its length, and the flow misses much of it
+  (recall, not precision, is what the CPU flow loses: textureless hose on a textureless board).
+  Each action's mask grows, pixel by pixel up to ``max_px`` steps, into the support pixels
+  whose CIELAB colour lies within ``colour`` of the mask's median colour.  This uses a cue the
+  motion does not give: it helps where the hoses differ in colour (cablesim's default palette)
+  and leaks along every hose of the same colour that touches the grasped one (measured on the
+  validation scenes with the colour test switched off: precision 0.85 -> 0.30), so it is an
+  option, not a default.
 """
 
 from __future__ import annotations
@@ -96,6 +107,20 @@ class ContrastParams:
 
 
 @dataclass(frozen=True)
+class GrowParams:
+    """Colour growth of the masks (module docstring)."""
+
+    colour: float = 15.0  # CIELAB distance (OpenCV's 8-bit Lab) to the mask's median colour
+    max_px: int = 256  # growth steps (8-connected pixels) from the mask
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.colour) and self.colour > 0) or self.max_px < 1:
+            raise InputError(
+                f"grow: colour > 0 and max_px >= 1, got colour {self.colour}, max_px {self.max_px}"
+            )
+
+
+@dataclass(frozen=True)
 class RefineParams:
     """Which bleed remedies run (module docstring); ``None`` switches one off."""
 
@@ -105,6 +130,7 @@ class RefineParams:
     forward_backward: float | None = None  # px
     foreground: ForegroundParams | None = None
     contrast: ContrastParams | None = None
+    grow: GrowParams | None = None
 
     def __post_init__(self) -> None:
         if self.photometric is not None and self.photometric < 0:
@@ -384,3 +410,36 @@ def support_mask(target: Frame, params: RefineParams) -> np.ndarray | None:
         c = contrast_mask(target.rgb, target.intrinsics, target.depth, params.contrast)
         out = c if out is None else out & c
     return out
+
+
+# ------------------------------------------------------------------------------ per mask
+def colour_guide(rgb: np.ndarray) -> np.ndarray:
+    """The target frame in OpenCV's 8-bit CIELAB (what :func:`grow_by_colour` compares)."""
+    return cv2.cvtColor(np.ascontiguousarray(rgb, dtype=np.uint8), cv2.COLOR_RGB2LAB)
+
+
+_K8 = np.ones((3, 3), np.uint8)
+
+
+def grow_by_colour(
+    mask: np.ndarray, guide: np.ndarray, params: GrowParams, support: np.ndarray | None = None
+) -> np.ndarray:
+    """``mask`` grown, one 8-connected pixel ring per step for up to ``params.max_px`` steps,
+    into the ``support`` pixels whose colour in ``guide`` (:func:`colour_guide`) lies within
+    ``params.colour`` of the median colour of ``mask``.  An empty mask stays empty."""
+    mask = np.asarray(mask, dtype=bool)
+    if not mask.any():
+        return mask.copy()
+    lab = guide.astype(np.float32)
+    ref = np.median(lab[mask], axis=0)
+    allowed = np.linalg.norm(lab - ref, axis=2) < params.colour
+    if support is not None:
+        allowed &= support
+    allowed_u8 = allowed.astype(np.uint8)
+    m = mask.astype(np.uint8)
+    for _ in range(params.max_px):
+        grown = (cv2.dilate(m, _K8) & allowed_u8) | m
+        if np.array_equal(grown, m):
+            break
+        m = grown
+    return m.astype(bool)

@@ -7,6 +7,9 @@ close.  ``release_and_retreat``: open, straight line out, retract.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 from cablesim.panda.description import MAX_OPENING, RETRACT_QPOS
 from cablesim.robot.base import MoveResult, Robot
 from cablesim.robot.pose import Pose
@@ -15,6 +18,26 @@ from cablesim.robot.pose import Pose
 def pregrasp_pose(grasp: Pose, distance: float) -> Pose:
     """``grasp`` moved back by ``distance`` along its approach (hand z) axis."""
     return grasp.translated(-distance * grasp.rotation[:, 2])
+
+
+@contextmanager
+def avoiding_hoses(robot: Robot) -> Iterator[None]:
+    """Inside the block the robot plans its arm links around the hoses, where its arm model
+    knows them (the simulated Panda hands them over: ``SimPandaConfig.avoid_hoses``; a real
+    arm's model has none, so nothing changes there).  The approach to a grasp or a push runs
+    inside it: planned against the board alone, a joint motion swept link6 through a hose and
+    crushed it (seeds 6062, 6077).  Retreats and parking stay outside: after the perception a
+    link brushing a hose does no harm, and a retreat that refused to would end the run."""
+    arm = getattr(robot, "arm", None)
+    if arm is None or not hasattr(arm, "avoid_hoses"):
+        yield
+        return
+    before = arm.avoid_hoses
+    arm.avoid_hoses = True
+    try:
+        yield
+    finally:
+        arm.avoid_hoses = before
 
 
 def move_joints_safely(robot: Robot, q, speed_factor: float = 0.3) -> MoveResult:

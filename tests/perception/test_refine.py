@@ -21,10 +21,13 @@ from cablesim.perception.flow_region import FlowRegion, RegionFlow
 from cablesim.perception.refine import (
     RAW,
     ForegroundParams,
+    GrowParams,
     RefineParams,
     SampleFilter,
+    colour_guide,
     fit_plane_inverse_depth,
     foreground_mask,
+    grow_by_colour,
     support_mask,
 )
 
@@ -250,3 +253,68 @@ def test_arm_masks_never_vote():
     st = compute_statistics(s, _ArmFlow(), methods=("correlation",))
     assert st.support is not None and not st.support[hose].any()
     assert support_mask(s.target, RAW) is None
+
+
+# ------------------------------------------------------------------ colour growth
+def _crossing() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A red hose (row band) crossing over a blue one (column band) on a grey board:
+    (rgb, red truth, blue truth)."""
+    rgb = np.full((60, 80, 3), 128, np.uint8)
+    red = np.zeros((60, 80), bool)
+    red[28:34, :] = True
+    blue = np.zeros((60, 80), bool)
+    blue[:, 40:46] = True
+    blue &= ~red  # the red hose lies on top
+    rgb[blue] = (40, 80, 200)
+    rgb[red] = (200, 40, 30)
+    return rgb, red, blue
+
+
+def test_colour_growth_fills_the_hose_and_stops_at_other_colours():
+    rgb, red, blue = _crossing()
+    seed = np.zeros_like(red)
+    seed[29:33, 5:12] = True  # the flow found a short piece of the red hose
+    grown = grow_by_colour(seed, colour_guide(rgb), GrowParams(colour=15.0))
+    np.testing.assert_array_equal(grown, red)  # all of it, across the crossing, nothing else
+    # limited steps: 10 px on either side of the seed
+    near = grow_by_colour(seed, colour_guide(rgb), GrowParams(colour=15.0, max_px=10))
+    assert near.sum() == 6 * (12 + 10 - 0)  # columns 0..21 of the 6 red rows
+    assert near[28:34, :22].all() and not near[:, 22:].any()
+    # the support bounds it (the right half is not allowed to vote)
+    support = np.zeros_like(red)
+    support[:, :50] = True
+    half = grow_by_colour(seed, colour_guide(rgb), GrowParams(), support)
+    np.testing.assert_array_equal(half, red & support)
+    assert not grow_by_colour(np.zeros_like(red), colour_guide(rgb), GrowParams()).any()
+
+
+def test_colour_growth_leaks_along_a_hose_of_the_same_colour():
+    """Why it is not a default: where the hoses share a colour the mask takes both."""
+    rgb, red, blue = _crossing()
+    rgb[blue] = (200, 40, 30)
+    seed = np.zeros_like(red)
+    seed[29:33, 5:12] = True
+    grown = grow_by_colour(seed, colour_guide(rgb), GrowParams())
+    np.testing.assert_array_equal(grown, red | blue)
+
+
+def test_grow_params_are_checked():
+    with pytest.raises(InputError, match="colour > 0"):
+        GrowParams(colour=0.0)
+    with pytest.raises(InputError, match="max_px"):
+        GrowParams(max_px=0)
+
+
+def test_colour_growth_in_the_pipeline_only_adds_pixels_of_the_bar(bar_stream: Stream):
+    """On the bar scene the grown masks hold the plain masks and stay on the bar."""
+    truth = bar_stream.target.truth.labels == 0
+    fg = RefineParams(foreground=ForegroundParams(colour_px=3))
+    plain = segment_stream(bar_stream, flow=DISFlow("medium"), refine=fg)
+    grow = RefineParams(foreground=ForegroundParams(colour_px=3), grow=GrowParams())
+    grown = segment_stream(bar_stream, flow=DISFlow("medium"), refine=grow)
+    assert grown.stats.grow == GrowParams() and grown.stats.guide is not None
+    for a, m in plain.masks.items():
+        g = grown.masks[a]
+        assert (g | m).sum() == g.sum()  # nothing lost
+        assert (g & ~truth).sum() <= (m & ~truth).sum()  # nothing added off the bar
+    assert (grown.mask(1) & truth).sum() >= (plain.mask(1) & truth).sum()

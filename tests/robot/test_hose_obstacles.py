@@ -16,7 +16,9 @@ RADIUS = 0.0125  # a 7.5 mm hose with 5 mm clearance
 
 @pytest.fixture(scope="module")
 def arm() -> ArmModel:
-    return ArmModel(hose_capsules=[0.02] * 20, hose_radius=RADIUS)
+    model = ArmModel(hose_capsules=[0.02] * 20, hose_radius=RADIUS)
+    model.avoid_hoses = True
+    return model
 
 
 def _geom_centre(arm: ArmModel, q: np.ndarray, name: str) -> np.ndarray:
@@ -94,4 +96,25 @@ def test_a_path_that_starts_touching_a_hose_may_leave_it_but_not_hit_another(
     arm.set_hoses([_line_through(start), _line_through(mid, direction=(0.0, 0.0, 1.0))])
     reason = arm.check_joint_path(q0, q1, 0.08)
     assert "link6" in reason and "joint path" in reason
+    arm.set_hoses()
+
+
+def test_hoses_count_only_while_avoiding_them(arm: ArmModel) -> None:
+    """``avoiding_hoses`` (the approach to a grasp or push) switches the hose check on for the
+    block; outside it (retreat, parking) a link may brush a hose."""
+    from cablesim.robot.grasping import avoiding_hoses
+
+    class Holder:  # anything with an arm model, as SimPanda and DryRunRobot
+        pass
+
+    robot = Holder()
+    robot.arm = arm
+    q = np.asarray(HOME_QPOS, float)
+    arm.set_hoses([_line_through(_geom_centre(arm, q, "arm/link6_g1"))])
+    arm.avoid_hoses = False
+    assert arm.check(q) == ""
+    with avoiding_hoses(robot):
+        assert "hose/" in arm.check(q)
+    assert arm.check(q) == "" and arm.avoid_hoses is False
+    arm.avoid_hoses = True
     arm.set_hoses()
