@@ -166,9 +166,11 @@ class ArmModel:
         # Robot-robot pairs generate contacts here (the broadphase filters on body masks too).
         m.geom_conaffinity[self._robot_geoms] = 3
         m.body_conaffinity[robot] |= 2
-        # the links (not the hand and fingers, which reach into the hoses to grasp) see the
-        # hose capsules
-        links = [m.body(n).id for n in self.names.bodies[:8]]
+        # links 0-6 see the hose capsules; link7 (the flange), the hand and the fingers do not:
+        # they reach in among the hoses to grasp, and brush the hoses that hang out in front
+        # on the way (measured: link7 within 6 mm of a hose on the approach line of seed 2);
+        # link6 is the one that swept through hoses and tore them (seeds 6062, 6077)
+        links = [m.body(n).id for n in self.names.bodies[:7]]
         self._link_geoms = np.isin(m.geom_bodyid, links)
         m.geom_conaffinity[self._link_geoms] |= _HOSE_BIT
         m.body_conaffinity[links] |= _HOSE_BIT
@@ -180,6 +182,11 @@ class ArmModel:
         # the hose capsules count only while this is set (cablesim.robot.grasping.avoiding_hoses:
         # the approach to a grasp or push; retreats and parking may brush a hose)
         self.avoid_hoses = False
+        # m of a hose capsule's radius a link may enter without it counting: 0 when planning
+        # ahead (the full clearance); the simulated arm executing a motion sets its clearance,
+        # so that only a link touching the hose itself stops it (the hoses move a little
+        # between the plan and the motion)
+        self.hose_slack = 0.0
 
         self.configuration = mink.Configuration(m)
         self.frame_task = mink.FrameTask(
@@ -195,14 +202,17 @@ class ArmModel:
         return len(self._hose_mocap)
 
     def set_hoses(self, polylines: Sequence[np.ndarray] = ()) -> None:
-        """Make the hoses obstacles for the arm links: the segments of the polylines (V, 3), in
+        """Make the hoses obstacles for arm links 0-6: the segments of the polylines (V, 3), in
         world coordinates and in order, take the capsules given at construction (their radius
         and half-lengths: the hoses' rest geometry), each centred on its segment and along it.
-        The hand and the fingers do not see them (they reach in among the hoses to grasp).  No
-        polylines: no hose obstacles.  They count only while ``avoid_hoses`` is set.
+        Link7, the hand and the fingers do not see them (they reach in among the hoses).  No
+        polylines: no hose obstacles.  They count only in joint paths
+        (:meth:`check_joint_path`: the fast free motions, where a link sweeping through a hose
+        crushes it) and only while ``avoid_hoses`` is set; a straight TCP line (the slow
+        approach into the hoses) and a single configuration do not see them.
 
-        A joint path or a line that starts with a link already touching a hose is not failed
-        for that link and hose (it may be moving away); any other link-hose contact fails it."""
+        A joint path that starts with a link already touching a hose is not failed for that
+        link and hose (it may be moving away); any other link-hose contact fails it."""
         d = self.data
         starts = [np.asarray(p, dtype=float)[:-1] for p in polylines]
         ends = [np.asarray(p, dtype=float)[1:] for p in polylines]
@@ -316,9 +326,11 @@ class ArmModel:
         opening: float = 0.08,
         min_distance: float = 0.0,
         ignore: set[tuple[int, int]] = frozenset(),  # type: ignore[assignment]
+        hoses: bool = False,
     ) -> list[tuple[str, str, float]]:
-        """Robot-obstacle and robot self-collision pairs (names, distance) at ``q``;
-        ``ignore`` holds (link geom, hose) pairs that do not count (see :meth:`set_hoses`)."""
+        """Robot-obstacle and robot self-collision pairs (names, distance) at ``q``; the hose
+        capsules count with ``hoses`` (and ``avoid_hoses``), but for the (link geom, hose)
+        pairs in ``ignore`` (see :meth:`set_hoses`)."""
         m, d = self.model, self.data
         self.set_q(q, opening)
         mujoco.mj_collision(m, d)
@@ -337,7 +349,11 @@ class ArmModel:
                 if m.geom_bodyid[robot_geom] == self._base_body:
                     continue  # the base stands on the table
                 hose = int(self._hose_of_geom[g2 if r1 else g1])
-                if hose >= 0 and (not self.avoid_hoses or (robot_geom, hose) in ignore):
+                if hose >= 0 and (
+                    not (hoses and self.avoid_hoses)
+                    or (robot_geom, hose) in ignore
+                    or c.dist > -self.hose_slack
+                ):
                     continue
             else:
                 continue
@@ -394,7 +410,6 @@ class ArmModel:
         n = max(1, math.ceil(dist / spacing), math.ceil(angle / angle_step))
         q = np.asarray(q_start, dtype=float)
         plan = [q]
-        touching = self._hose_contacts(q, opening)
         for i in range(1, n + 1):
             s = i / n
             r = self.solve(start.interpolate(target, s), q, q, opening)
@@ -405,7 +420,7 @@ class ArmModel:
                 )
             if np.max(np.abs(r.q - q)) > max_joint_jump:
                 return [], f"IK jumped between branches {where} (near a singularity or limit)"
-            problem = self.check(r.q, opening, touching)
+            problem = self.check(r.q, opening)
             if problem:
                 return [], f"{problem} {where}"
             q = r.q
@@ -425,7 +440,7 @@ class ArmModel:
         n = max(1, math.ceil(np.max(np.abs(q_target - q0)) / step))
         touching = self._hose_contacts(q0, opening)
         for i in range(1, n + 1):
-            problem = self.check(q0 + (q_target - q0) * i / n, opening, touching)
+            problem = self.check(q0 + (q_target - q0) * i / n, opening, touching, hoses=True)
             if problem:
                 return f"{problem} at {100 * i / n:.0f}% of the joint path"
         return ""
@@ -435,13 +450,14 @@ class ArmModel:
         q: np.ndarray,
         opening: float = 0.08,
         ignore: set[tuple[int, int]] = frozenset(),  # type: ignore[assignment]
+        hoses: bool = False,
     ) -> str:
-        """Empty string if ``q`` is within limits and collision-free (but for the ``ignore``
-        link-hose pairs), else the reason."""
+        """Empty string if ``q`` is within limits and collision-free, else the reason; with
+        ``hoses`` the hose capsules count too (:meth:`collisions`)."""
         reason = self.limit_violation(q)
         if reason:
             return f"joint limit: {reason}"
-        hits = self.collisions(q, opening, ignore=ignore)
+        hits = self.collisions(q, opening, ignore=ignore, hoses=hoses)
         if hits:
             a, b, dist = hits[0]
             return f"collision: {a} with {b} (penetration {-dist * 1000:.1f} mm)"

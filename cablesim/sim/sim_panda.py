@@ -15,7 +15,8 @@ a few mm of lag); it is not the default because it is not how the real robot hol
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -187,6 +188,18 @@ class SimPanda(ArmModelChecks, Robot):
         w = self.world
         self.arm.set_hoses([w.hose_vertices(i) for i in range(len(w.hoses))])
 
+    @contextmanager
+    def _executing(self) -> Iterator[None]:
+        """Planning the motion about to be executed: the hoses as they are now, and a link may
+        come within the clearance of a hose (only touching the hose itself counts), since the
+        hoses have moved a little since the motion was planned ahead."""
+        self._update_obstacles()
+        self.arm.hose_slack = self.config.hose_clearance
+        try:
+            yield
+        finally:
+            self.arm.hose_slack = 0.0
+
     def plan_line(self, target: Pose) -> tuple[list[np.ndarray], str]:
         """Joint waypoints along the straight TCP line to ``target``; empty list + reason on failure."""
         self._update_obstacles()
@@ -205,7 +218,8 @@ class SimPanda(ArmModelChecks, Robot):
     def move_to(self, pose: Pose, speed: float = 0.1, angular_speed: float = 0.8) -> MoveResult:
         if speed <= 0 or angular_speed <= 0:
             return MoveResult(False, "speed must be > 0")
-        plan, reason = self.plan_line(pose)
+        with self._executing():
+            plan, reason = self.plan_line(pose)
         if not plan:
             return MoveResult(False, reason, self._pos_error(pose))
         dist, angle = self.ee_pose().distance_to(pose)
@@ -218,8 +232,8 @@ class SimPanda(ArmModelChecks, Robot):
         if not 0 < speed_factor <= 1:
             return MoveResult(False, f"speed_factor must be in (0, 1], got {speed_factor}")
         q0 = self.joint_positions
-        self._update_obstacles()
-        problem = self.arm.check_joint_path(q0, q, self.gripper_opening)
+        with self._executing():
+            problem = self.arm.check_joint_path(q0, q, self.gripper_opening)
         if problem:
             return MoveResult(False, problem)
         n = max(1, math.ceil(np.max(np.abs(q - q0)) / 0.05))
