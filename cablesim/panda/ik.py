@@ -183,9 +183,8 @@ class ArmModel:
         # the approach to a grasp or push; retreats and parking may brush a hose)
         self.avoid_hoses = False
         # m of a hose capsule's radius a link may enter without it counting: 0 when planning
-        # ahead (the full clearance); the simulated arm executing a motion sets its clearance,
-        # so that only a link touching the hose itself stops it (the hoses move a little
-        # between the plan and the motion)
+        # ahead; the simulated arm executing a motion sets its clearance and slack (the hoses
+        # move a little between the plan and the motion)
         self.hose_slack = 0.0
 
         self.configuration = mink.Configuration(m)
