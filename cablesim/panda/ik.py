@@ -234,18 +234,27 @@ class ArmModel:
             owner = [np.full(len(x), h) for h, x in enumerate(starts)]
             self._hose_of_geom[self._hose_geoms[:n]] = np.concatenate(owner)
 
+    def _contacts(
+        self, q: np.ndarray, opening: float, min_distance: float
+    ) -> list[tuple[int, int, float]]:
+        """(geom, geom, distance) of the geom-geom contacts at ``q`` closer than
+        ``min_distance``."""
+        m, d = self.model, self.data
+        self.set_q(q, opening)
+        mujoco.mj_collision(m, d)
+        out = []
+        for c in d.contact[: d.ncon]:
+            g1, g2 = int(c.geom[0]), int(c.geom[1])
+            if g1 >= 0 and g2 >= 0 and c.dist < min_distance:
+                out.append((g1, g2, float(c.dist)))
+        return out
+
     def _hose_contacts(self, q: np.ndarray, opening: float) -> set[tuple[int, int]]:
         """(link geom, hose) pairs in contact at ``q``."""
         if not self.avoid_hoses or not (self._hose_of_geom >= 0).any():
             return set()
-        m, d = self.model, self.data
-        self.set_q(q, opening)
-        mujoco.mj_collision(m, d)
         out = set()
-        for c in d.contact[: d.ncon]:
-            g1, g2 = int(c.geom[0]), int(c.geom[1])
-            if c.dist >= 0 or g1 < 0 or g2 < 0:
-                continue
+        for g1, g2, _ in self._contacts(q, opening, 0.0):
             if self._hose_of_geom[g2] >= 0:
                 out.add((g1, int(self._hose_of_geom[g2])))
             elif self._hose_of_geom[g1] >= 0:
@@ -330,14 +339,9 @@ class ArmModel:
         """Robot-obstacle and robot self-collision pairs (names, distance) at ``q``; the hose
         capsules count with ``hoses`` (and ``avoid_hoses``), but for the (link geom, hose)
         pairs in ``ignore`` (see :meth:`set_hoses`)."""
-        m, d = self.model, self.data
-        self.set_q(q, opening)
-        mujoco.mj_collision(m, d)
+        m = self.model
         out = []
-        for c in d.contact[: d.ncon]:
-            g1, g2 = int(c.geom[0]), int(c.geom[1])
-            if g1 < 0 or g2 < 0 or c.dist >= min_distance:
-                continue
+        for g1, g2, dist in self._contacts(q, opening, min_distance):
             r1, r2 = self._robot_geoms[g1], self._robot_geoms[g2]
             if r1 and r2:
                 b1, b2 = self._chain.get(m.geom_bodyid[g1]), self._chain.get(m.geom_bodyid[g2])
@@ -351,12 +355,12 @@ class ArmModel:
                 if hose >= 0 and (
                     not (hoses and self.avoid_hoses)
                     or (robot_geom, hose) in ignore
-                    or c.dist > -self.hose_slack
+                    or dist > -self.hose_slack
                 ):
                     continue
             else:
                 continue
-            out.append((m.geom(g1).name, m.geom(g2).name, float(c.dist)))
+            out.append((m.geom(g1).name, m.geom(g2).name, dist))
         return out
 
     def seeds(self, pose: Pose, current: np.ndarray) -> list[np.ndarray]:
@@ -483,6 +487,8 @@ class ArmModelChecks:
     def _reachable(
         self, pose: Pose, seeds: Sequence[np.ndarray] | None
     ) -> tuple[bool, str, IKResult | None]:
+        # the movable obstacles as they are now: the checks of a dry run of the interaction
+        # (plan_interaction), which follow, plan on this arm model too
         self._update_obstacles()
         if seeds is None:
             seeds = self.arm.seeds(pose, self.joint_positions)

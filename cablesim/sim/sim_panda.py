@@ -194,9 +194,9 @@ class SimPanda(ArmModelChecks, Robot):
 
     @contextmanager
     def _executing(self) -> Iterator[None]:
-        """Planning the motion about to be executed: the hoses as they are now, and a link may
-        come through the clearance and ``hose_slack`` into a hose, since the hoses have moved a
-        little since the motion was planned ahead."""
+        """Checking the joint motion about to be executed: the hoses as they are now, and a
+        link may come through the clearance and ``hose_slack`` into a hose, since the hoses
+        have moved a little since the motion was planned ahead."""
         self._update_obstacles()
         self.arm.hose_slack = self.config.hose_clearance + self.config.hose_slack
         try:
@@ -206,7 +206,6 @@ class SimPanda(ArmModelChecks, Robot):
 
     def plan_line(self, target: Pose) -> tuple[list[np.ndarray], str]:
         """Joint waypoints along the straight TCP line to ``target``; empty list + reason on failure."""
-        self._update_obstacles()
         cfg = self.config
         return self.arm.plan_line(
             self.ee_pose(),
@@ -222,8 +221,7 @@ class SimPanda(ArmModelChecks, Robot):
     def move_to(self, pose: Pose, speed: float = 0.1, angular_speed: float = 0.8) -> MoveResult:
         if speed <= 0 or angular_speed <= 0:
             return MoveResult(False, "speed must be > 0")
-        with self._executing():
-            plan, reason = self.plan_line(pose)
+        plan, reason = self.plan_line(pose)  # straight lines do not see the hoses (ArmModel)
         if not plan:
             return MoveResult(False, reason, self._pos_error(pose))
         dist, angle = self.ee_pose().distance_to(pose)
