@@ -76,6 +76,7 @@ def test_config_file_reruns_and_flags_override_it(tmp_path, capsys):
         (["--set", "episode.scene.hoses.count=abc"], "episode.scene.hoses.count"),
         (["--set", "nonsense=1"], "nonsense"),
         (["--config", "/nonexistent/config.json"], "/nonexistent/config.json"),
+        (["--grow-colour", "300"], "grow_colour"),
     ],
 )
 def test_bad_config_input_is_one_line_naming_it(tmp_path, capsys, extra, needle):

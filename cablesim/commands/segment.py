@@ -189,8 +189,6 @@ def _refine(args: argparse.Namespace) -> RefineParams | None:
         raise InputError(
             f"--grow-colour applies to correlation, segmentation and ablation, not {args.method!r}"
         )
-    if not 0 < args.grow_colour <= 255:
-        raise InputError(f"--grow-colour must be in (0, 255], got {args.grow_colour}")
     return dataclasses.replace(DEFAULT_REFINE, grow=GrowParams(colour=args.grow_colour))
 
 
@@ -262,6 +260,7 @@ def run(args: argparse.Namespace) -> int:
         "beta": args.beta,
         "params": vars(params),
         "published": seg.stats.published_meta or None,
+        "refine": seg.stats.refine,
         "given_segment_px": None if segment is None else int(segment.sum()),
         "voted_px": {"union": int(seg.mask(1).sum()), "intersection": int(seg.mask(n).sum())},
         "truth": truth is not None,

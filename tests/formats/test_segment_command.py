@@ -84,3 +84,22 @@ def test_segment_a_realsense_recording_with_a_gripper_log(tmp_path, moving_strea
     scores = json.loads((out / "scores.json").read_text())
     assert scores["union"]["recall"] > 0.5
     assert main(["segment", str(db3), "--out", str(out)]) == 2  # no gripper log
+
+
+def test_segment_with_colour_growth(tmp_path, moving_stream, capsys):
+    """``--grow-colour`` grows the masks along the target's colour; the published methods
+    refuse it, and a bad distance is one line naming it."""
+    rec = write_stream(moving_stream, tmp_path / "rec")
+    argv = ["segment", str(rec), "--flow", "oracle", "--quiet", "--method", "correlation"]
+    assert main([*argv, "--out", str(tmp_path / "plain")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "grown"), "--grow-colour", "15"]) == 0
+    plain = np.load(tmp_path / "plain" / "votes.npy") >= 1
+    grown = np.load(tmp_path / "grown" / "votes.npy") >= 1
+    assert (grown | plain).sum() == grown.sum() >= plain.sum()  # grown, nothing lost
+    summary = json.loads((tmp_path / "grown" / "summary.json").read_text())
+    assert summary["refine"]["grow"]["colour"] == 15.0
+    pub = ["segment", str(rec), "--out", str(tmp_path / "p"), "--method", "published"]
+    assert main([*pub, "--grow-colour", "15"]) == 2
+    assert "--grow-colour applies to" in capsys.readouterr().err
+    assert main([*argv, "--out", str(tmp_path / "bad"), "--grow-colour", "-1"]) == 2
+    assert "colour > 0" in capsys.readouterr().err
