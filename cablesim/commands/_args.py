@@ -133,6 +133,18 @@ def write_config(out: Path, cfg: Any, **extra: Any) -> Path:
     return path
 
 
+def add_grow_colour_argument(p: argparse.ArgumentParser, applies_to: str = "") -> None:
+    """``--grow-colour LAB``: the masks grow along the target's colour (``RefineParams.grow``)."""
+    p.add_argument(
+        "--grow-colour",
+        type=float,
+        default=None,
+        metavar="LAB",
+        help="grow the masks along the target's colour within this CIELAB distance (off; "
+        f"{applies_to}helps only where the hoses differ in colour)",
+    )
+
+
 def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed") -> None:
     add_config_arguments(p)
     p.add_argument("--seed", type=int, default=None, help=f"{seed_help} (default 0)")

@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from cablesim.commands._args import (
+    add_grow_colour_argument,
     add_interaction_arguments,
     add_scene_arguments,
     apply_interaction_arguments,
@@ -68,14 +69,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="vote carrying between targets: dis (default), oracle (ground truth), none",
     )
-    p.add_argument(
-        "--grow-colour",
-        type=float,
-        default=None,
-        metavar="LAB",
-        help="grow the masks along the target's colour within this CIELAB distance (off; "
-        "helps only where the hoses differ in colour)",
-    )
+    add_grow_colour_argument(p)
     p.add_argument("--perturb", action="store_true", help="disturb neighbouring hoses in actions")
     p.add_argument("--record", action="store_true", help="record every interaction (sim)")
     add_interaction_arguments(p)

@@ -34,6 +34,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from cablesim.commands._args import add_grow_colour_argument
 from cablesim.errors import InputError, RecordingError
 from cablesim.jsonutil import json_default
 from cablesim.perception.frames import Stream
@@ -87,14 +88,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="compute flow on this crop (default: the sequence's own, if any)",
     )
     p.add_argument("--scale", type=float, help="scale the crop by this factor for the flow")
-    p.add_argument(
-        "--grow-colour",
-        type=float,
-        default=None,
-        metavar="LAB",
-        help="grow the masks along the target's colour within this CIELAB distance (off; "
-        "correlation, segmentation, ablation; helps only where the hoses differ in colour)",
-    )
+    add_grow_colour_argument(p, "correlation, segmentation, ablation; ")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
 
 
