@@ -197,6 +197,20 @@ def versions_line() -> str:
     )
 
 
+def run_meta(**extra: Any) -> dict[str, Any]:
+    """What every benchmark result records about its run: date, commit, machine and versions,
+    then ``extra``."""
+    import datetime
+
+    return {
+        "date": datetime.datetime.now().isoformat(timespec="seconds"),
+        "commit": git_commit(),
+        "machine": machine_line(),
+        "versions": versions_line(),
+        **extra,
+    }
+
+
 def git_commit() -> str:
     import cablesim
 

@@ -25,20 +25,17 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _interaction import (  # noqa: E402
-    git_commit,
-    machine_line,
     pin_to_one_core,
     run_interaction,
+    run_meta,
     single_thread_environment,
     uptime,
-    versions_line,
 )
 from _machine import write_results  # noqa: E402
 
 single_thread_environment()
 
 import argparse  # noqa: E402
-import datetime  # noqa: E402
 import json  # noqa: E402
 import statistics  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -101,19 +98,15 @@ def main() -> int:
     session.close()
     load_end = uptime()
     digests = {r["digest"] for r in runs}
-    meta = {
-        "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        "machine": machine_line(),
-        "pinned_core": core,
-        "versions": versions_line(),
-        "commit": git_commit(),
-        "load_start": load_start,
-        "load_end": load_end,
-        "seed": args.seed,
-        "hose": hose,
-        "repeats": args.repeats,
-        "deterministic": len(digests) == 1,
-    }
+    meta = run_meta(
+        pinned_core=core,
+        load_start=load_start,
+        load_end=load_end,
+        seed=args.seed,
+        hose=hose,
+        repeats=args.repeats,
+        deterministic=len(digests) == 1,
+    )
     if args.json_out:
         args.json_out.write_text(json.dumps({"meta": meta, "runs": runs}, indent=1))
     text = report(meta, runs, args.baseline)

@@ -25,18 +25,15 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _interaction import (  # noqa: E402
-    git_commit,
-    machine_line,
+    run_meta,
     single_thread_environment,
     uptime,
-    versions_line,
 )
 from _machine import write_results  # noqa: E402
 
 single_thread_environment()
 
 import argparse  # noqa: E402
-import datetime  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -342,14 +339,7 @@ def main() -> int:
     for spec in args.replay:
         seed, _, t = spec.partition(":")
         replays.append(replay(int(seed), float(t), args.replay_duration))
-    meta = {
-        "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        "commit": git_commit(),
-        "machine": machine_line(),
-        "versions": versions_line(),
-        "load_start": load_start,
-        "load_end": uptime(),
-    }
+    meta = run_meta(load_start=load_start, load_end=uptime())
     text = report(runs, meta)
     if replays:
         text += "\n" + "\n".join(report_replays(replays))

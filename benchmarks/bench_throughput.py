@@ -20,19 +20,16 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _interaction import (  # noqa: E402
-    git_commit,
-    machine_line,
     run_interaction,
+    run_meta,
     single_thread_environment,
     uptime,
-    versions_line,
 )
 from _machine import write_results  # noqa: E402
 
 single_thread_environment()
 
 import argparse  # noqa: E402
-import datetime  # noqa: E402
 import json  # noqa: E402
 import multiprocessing  # noqa: E402
 import statistics  # noqa: E402
@@ -122,14 +119,7 @@ def main() -> int:
         [r["digest"] for r in row["results"]] == [r["digest"] for r in rows[0]["results"]]
         for row in rows
     )
-    meta = {
-        "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        "machine": machine_line(),
-        "versions": versions_line(),
-        "commit": git_commit(),
-        "seeds": seeds,
-        "identical_results": same,
-    }
+    meta = run_meta(seeds=seeds, identical_results=same)
     if args.json_out:
         args.json_out.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
     text = report(meta, rows)
