@@ -78,6 +78,9 @@ class FlowEstimator(ABC):
     """One optical-flow back end.  Subclasses implement :meth:`compute`."""
 
     name: str = "flow"
+    #: whether the flow is estimated from the images (and so sees only the motion normal to
+    #: an edge, the aperture problem); ground truth is not
+    image_based: bool = True
 
     @abstractmethod
     def compute(self, image1: np.ndarray, image2: np.ndarray) -> np.ndarray:
@@ -107,6 +110,7 @@ class OracleFlow(FlowEstimator):
     """
 
     name = "oracle"
+    image_based = False
 
     def __init__(self, invalid_value: float = 0.0) -> None:
         self.invalid_value = float(invalid_value)

@@ -131,6 +131,7 @@ class RegionFlow(FlowEstimator):
         self.inner = inner
         self.region = region
         self.name = inner.name
+        self.image_based = inner.image_based
         self._target: tuple[np.ndarray, np.ndarray] | None = None
 
     def compute(self, image1: np.ndarray, image2: np.ndarray) -> np.ndarray:

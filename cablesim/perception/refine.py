@@ -12,6 +12,14 @@ gets no sample in that frame (its flow becomes NaN, which the accumulators skip)
   joint state) marks where frame k shows the arm; target pixels that see the arm in frame k
   (at p or at p + phi) have no measurement there.  Where no frame carries a mask nothing
   changes.  The target frame's own mask (normally empty: the arm has left) never votes.
+- **normal flow** (``normal_flow``): a hose has one colour along its length, so an image-based
+  flow sees only the motion across it (the aperture problem); the motion along it is
+  unconstrained and DIS fills it with whatever its patches drift to, large on a plain board,
+  which breaks the follow test of a hose that moves with the gripper.  Every flow vector is
+  replaced by its component along the target's local edge normal: the dominant eigenvector of
+  the colour structure tensor smoothed over ``normal_flow`` px.  Correlation needs one
+  component per pixel anyway (it projects the motion on its principal direction), and this
+  one is observed.  Ground-truth flow (``FlowEstimator.image_based`` False) is left whole.
 - **photometric check** (``photometric``): the claimed motion must explain the image:
   ``max_c |target_c(p) - frame_c(p + phi)| <= photometric`` grey levels after a Gaussian blur
   of ``photometric_blur`` px (sensor noise).
@@ -125,6 +133,7 @@ class RefineParams:
     """Which bleed remedies run (module docstring); ``None`` switches one off."""
 
     arm_masks: bool = True
+    normal_flow: float | None = None  # px, structure-tensor smoothing; None keeps the full flow
     photometric: float | None = None  # grey levels
     photometric_blur: float = 1.0  # px
     forward_backward: float | None = None  # px
@@ -133,6 +142,10 @@ class RefineParams:
     grow: GrowParams | None = None
 
     def __post_init__(self) -> None:
+        if self.normal_flow is not None and not (
+            np.isfinite(self.normal_flow) and self.normal_flow > 0
+        ):
+            raise InputError(f"normal_flow must be > 0 (px) or None, got {self.normal_flow}")
         if self.photometric is not None and self.photometric < 0:
             raise InputError(f"photometric must be >= 0 or None, got {self.photometric}")
         if self.forward_backward is not None and self.forward_backward <= 0:
@@ -142,7 +155,12 @@ class RefineParams:
 
     @property
     def per_sample(self) -> bool:
-        return self.arm_masks or self.photometric is not None or self.forward_backward is not None
+        return (
+            self.arm_masks
+            or self.normal_flow is not None
+            or self.photometric is not None
+            or self.forward_backward is not None
+        )
 
     def describe(self) -> dict:
         from dataclasses import asdict
@@ -153,16 +171,41 @@ class RefineParams:
 #: no remedy at all (the flow as the back end gives it)
 RAW = RefineParams(arm_masks=False)
 #: what perception uses unless told otherwise (chosen on the validation scenes of
-#: ``benchmarks/realistic_flow.py``): arm masks where the frames have them, and the depth
-#: foreground with its edges moved to the image's colour edges within 3 px; it abstains where
-#: the target has no usable depth
-DEFAULT_REFINE = RefineParams(foreground=ForegroundParams(colour_px=3))
+#: ``benchmarks/realistic_flow.py``): the normal flow (structure tensor over 1.5 px), arm masks
+#: where the frames have them, and the depth foreground with its edges moved to the image's
+#: colour edges within 3 px; it abstains where the target has no usable depth
+DEFAULT_REFINE = RefineParams(normal_flow=1.5, foreground=ForegroundParams(colour_px=3))
 
 
 # ------------------------------------------------------------------------------ per sample
 def _grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     xs, ys = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     return xs, ys
+
+
+def edge_normals(rgb: np.ndarray, sigma: float) -> np.ndarray:
+    """HxWx2 float32 unit vectors (x, y): the dominant eigenvector of the structure tensor of
+    ``rgb`` (3x3 Sobel gradients summed over the channels, each product smoothed by a Gaussian
+    of ``sigma`` px), i.e. the direction across the local edge.  Zero where the image has no
+    gradient at all (there no direction is observed)."""
+    f = np.asarray(rgb, np.float32)
+    gx = cv2.Sobel(f, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(f, cv2.CV_32F, 0, 1, ksize=3)
+    if f.ndim == 3:
+        a, b, c = (gx * gx).sum(2), (gx * gy).sum(2), (gy * gy).sum(2)
+    else:
+        a, b, c = gx * gx, gx * gy, gy * gy
+    a, b, c = (cv2.GaussianBlur(x, (0, 0), sigma) for x in (a, b, c))
+    theta = 0.5 * np.arctan2(2.0 * b, a - c)
+    n = np.dstack([np.cos(theta), np.sin(theta)]).astype(np.float32)
+    n[(a + c) <= 0] = 0.0
+    return n
+
+
+def normal_flow(phi: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """``phi`` replaced by its component along ``normals`` (HxWx2 unit vectors or zero)."""
+    dot = phi[..., 0] * normals[..., 0] + phi[..., 1] * normals[..., 1]
+    return normals * dot[..., None]
 
 
 @dataclass
@@ -186,14 +229,28 @@ class SampleFilter:
         s = self.params.photometric_blur
         return cv2.GaussianBlur(rgb, (0, 0), s) if s > 0 else rgb
 
+    def _normals(self) -> np.ndarray | None:
+        """The target's edge normals, or None where the normal flow is off (or the flow is
+        ground truth, which has no aperture problem)."""
+        p = self.params
+        if p.normal_flow is None or not getattr(self.flow, "image_based", True):
+            return None
+        if "normals" not in self._cache:
+            self._cache["normals"] = edge_normals(self.target.rgb, p.normal_flow)
+        return self._cache["normals"]
+
     def apply(self, phi: np.ndarray, frame: Frame) -> np.ndarray:
         p = self.params
         arm = p.arm_masks and frame.arm_mask is not None
-        if frame is self.target or not (
-            arm or p.photometric is not None or p.forward_backward is not None
-        ):
+        normals = self._normals()
+        checks = arm or p.photometric is not None or p.forward_backward is not None
+        if frame is self.target or not (checks or normals is not None):
             return phi
         phi = as_flow(phi, self.target.shape, "flow")
+        if normals is not None:
+            phi = normal_flow(phi, normals)  # the checks below see the normal flow
+        if not checks:
+            return phi
         bad = np.zeros(phi.shape[:2], bool)
         finite = phi if np.isfinite(phi.sum()) else np.nan_to_num(phi)
         mxy = cv2.add(self._grid(), finite)  # where each target pixel lands in frame k

@@ -25,9 +25,11 @@ from cablesim.perception.refine import (
     RefineParams,
     SampleFilter,
     colour_guide,
+    edge_normals,
     fit_plane_inverse_depth,
     foreground_mask,
     grow_by_colour,
+    normal_flow,
     support_mask,
 )
 
@@ -318,3 +320,80 @@ def test_colour_growth_in_the_pipeline_only_adds_pixels_of_the_bar(bar_stream: S
         assert (g | m).sum() == g.sum()  # nothing lost
         assert (g & ~truth).sum() <= (m & ~truth).sum()  # nothing added off the bar
     assert (grown.mask(1) & truth).sum() >= (plain.mask(1) & truth).sum()
+
+
+# ------------------------------------------------------------------------------ normal flow
+def _plain_bar(offset: float) -> np.ndarray:
+    """The bar on a plain grey plane: the solid board, where only the bar's edges carry
+    texture."""
+    return _bar_scene(offset, np.full((H, W), 120.0))
+
+
+def test_edge_normals_point_across_the_bar_and_vanish_where_nothing_is_seen():
+    n = edge_normals(_plain_bar(0.0), 1.5)
+    for x in (BAR_X - 1, BAR_X, BAR_X + BAR_W - 1, BAR_X + BAR_W):
+        assert np.allclose(np.abs(n[10:-10, x]), [1.0, 0.0], atol=1e-4)
+    assert np.all(n[:, :40] == 0)  # the plain plane has no gradient: no direction observed
+    flow = np.zeros((H, W, 2), np.float32)
+    flow[..., 0], flow[..., 1] = 2.0, 3.0  # across the bar, and along it
+    out = normal_flow(flow, n)
+    edge = out[10:-10, BAR_X - 1]
+    assert np.allclose(edge, [2.0, 0.0], atol=1e-3)  # the motion along the bar is dropped
+
+
+class _Aperture(FlowEstimator):
+    """The flow an image-based estimator gives for the bar: the true motion across it plus a
+    drift along it that nothing in the images constrains (a seeded random walk, as DIS's
+    patches wander along a plain hose on a plain board)."""
+
+    name = "aperture"
+
+    def __init__(self) -> None:
+        self.rng = np.random.default_rng(4)
+
+    def compute(self, image1, image2):
+        raise AssertionError("frame_flow only")
+
+    def frame_flow(self, frame: Frame, target: Frame) -> np.ndarray:
+        out = np.zeros((H, W, 2), np.float32)
+        if frame is target:
+            return out
+        d = frame.gripper[0] * F / Z_BAR  # px, the bar's shift in this frame
+        out[:, BAR_X - 1 : BAR_X + BAR_W + 1, 0] = d
+        out[:, BAR_X - 1 : BAR_X + BAR_W + 1, 1] = self.rng.normal(0.0, 4.0)
+        return out
+
+
+def test_normal_flow_restores_the_follow_test_of_a_plain_bar():
+    """With a drift along the bar the correlation's principal direction is the drift and the
+    bar fails the follow test; projected on the edge normals it passes."""
+    frames = []
+    n = 16
+    for k in range(n + 1):
+        d = 3.0 * np.sin(2 * np.pi * k / n)
+        g = np.array([d * Z_BAR / F, 0.0, Z_BAR])
+        frames.append(Frame(_plain_bar(d), _bar_depth(), K, g, action=0, sample=k))
+    target = Frame(_plain_bar(0.0), _bar_depth(), K, np.array([0.3, 0.3, 0.5]))
+    stream = Stream([*frames, target])
+    edges = np.zeros((H, W), bool)
+    edges[10:-10, [BAR_X - 1, BAR_X, BAR_X + BAR_W - 1, BAR_X + BAR_W]] = True
+
+    def r2(refine: RefineParams) -> np.ndarray:
+        st = compute_statistics(stream, _Aperture(), methods=("correlation",), refine=refine)
+        return st.correlation[0].r2[edges]
+
+    assert np.median(r2(RAW)) < 0.5
+    assert np.all(r2(RefineParams(arm_masks=False, normal_flow=1.5)) > 0.99)
+
+
+def test_normal_flow_leaves_ground_truth_whole_and_is_checked():
+    target = Frame(_plain_bar(0.0), _bar_depth(), K, np.zeros(3))
+    frame = Frame(_plain_bar(1.0), _bar_depth(), K, np.zeros(3), action=0, sample=1)
+    phi = np.zeros((H, W, 2), np.float32)
+    phi[..., 1] = 2.0  # along the bar
+    params = RefineParams(arm_masks=False, normal_flow=1.5)
+    np.testing.assert_array_equal(SampleFilter(params, target, OracleFlow()).apply(phi, frame), phi)
+    projected = SampleFilter(params, target, DISFlow()).apply(phi, frame)
+    assert np.allclose(projected[10:-10, BAR_X - 1], 0.0, atol=1e-3)
+    with pytest.raises(InputError, match="normal_flow"):
+        RefineParams(normal_flow=0.0)
