@@ -177,6 +177,7 @@ FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {
 SAMPLES: dict[str, RefineParams] = {
     "raw": RefineParams(arm_masks=False),
     "arm": RefineParams(arm_masks=True),
+    "arm+normal": RefineParams(normal_flow=1.5),
     "arm+photo20": RefineParams(photometric=20.0),
     "arm+photo30": RefineParams(photometric=30.0),
     "arm+photo45": RefineParams(photometric=45.0),

@@ -29,6 +29,10 @@ def _combo(c: list) -> str:
     return f"`{c[0]}` / `{c[1]}` / `{c[2]}`{grow}"
 
 
+#: the configurations of the tables, in order (a report may lack some)
+ROWS = ("before", "previous", "after", "after+colour", "oracle")
+
+
 def render(rep: dict[str, Any]) -> str:
     sc = rep["scenes"]
     L = [
@@ -66,7 +70,13 @@ def render(rep: dict[str, Any]) -> str:
         "depth foreground with its edges moved to the image's colour edges within N px, "
         "`contrast` = colour contrast cue; see `cablesim.perception.refine`",
         f"- **before** = {_combo(rep['before'])} (perception before this work), **after** = "
-        f"{_combo(rep['after'])} (chosen on the validation table below)"
+        f"{_combo(rep['after'])} (chosen on the validation table below; `normal` = the "
+        "flow projected on the target's edge normals, `RefineParams.normal_flow`)"
+        + (
+            f"; **previous** = {_combo(rep['previous'])} (the defaults before the normal flow)"
+            if "previous" in rep
+            else ""
+        )
         + (
             f"; **after+colour** = {_combo(rep['colour'])}: the option "
             "`RefineParams.grow` (`--grow-colour`), each action's mask grown along the target's "
@@ -85,7 +95,7 @@ def render(rep: dict[str, Any]) -> str:
         "F_0.4 | IoU |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for name in ("before", "after", "after+colour", "oracle", "oracle+support"):
+    for name in (*ROWS, "oracle+support"):
         if f"{name}/noisy" not in res:
             continue
         rn, rc = res[f"{name}/noisy"], res.get(f"{name}/clean")
@@ -114,7 +124,7 @@ def render(rep: dict[str, Any]) -> str:
         "| configuration | beta | thresholds (val) | P | R | F_beta | IoU |",
         "|---|---|---|---|---|---|---|",
     ]
-    for name in ("before", "after", "after+colour", "oracle"):
+    for name in ROWS:
         r = res.get(f"{name}/noisy")
         if not r:
             continue
@@ -142,7 +152,7 @@ def render(rep: dict[str, Any]) -> str:
         "noise-free |",
         "|---|---|---|",
     ]
-    for name in ("before", "after", "after+colour", "oracle"):
+    for name in ROWS:
         if f"{name}/noisy" in res:
             a = res[f"{name}/noisy"]["methods"]["correlation"]["test"]["0.4"]["fp_near_hose"]
             clean = res.get(f"{name}/clean")
@@ -155,20 +165,19 @@ def render(rep: dict[str, Any]) -> str:
     L += [
         "## Per test scene: motion correlation, beta 0.4, noisy",
         "",
-        "| scene | before P | R | F_0.4 | after P | R | F_0.4 | after+colour P | R | F_0.4 | "
-        "oracle P | R | F_0.4 |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| scene | " + " | ".join(f"{n} P | R | F_0.4" for n in ROWS if f"{n}/noisy" in res) + " |",
+        "|---|" + "---|---|---|" * sum(f"{n}/noisy" in res for n in ROWS),
     ]
     names = sc["test_wood"], sc["test_solid"]
     scenes = [f"{s} wood" for s in names[0]] + [f"{s} solid" for s in names[1]]
     per = {
         n: res[f"{n}/noisy"]["methods"]["correlation"]["test"]["0.4"]["all"]["per_scene"]
-        for n in ("before", "after", "after+colour", "oracle")
+        for n in ROWS
         if f"{n}/noisy" in res
     }
     for i, s in enumerate(scenes):
         cells = []
-        for n in ("before", "after", "after+colour", "oracle"):
+        for n in ROWS:
             if n in per:
                 p = per[n][i]
                 cells.append(f"{_f(p['precision'])} | {_f(p['recall'])} | {_f(p['f'])}")

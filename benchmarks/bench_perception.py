@@ -203,7 +203,7 @@ def bench_refine(n_frames: int, repeats: int) -> dict[str, float]:
         "before: DIS medium, raw flow": (DISFlow("medium"), RAW),
         "DIS medium + arm masks": (DISFlow("medium"), RefineParams()),
         "DIS medium + arm masks + photometric": (DISFlow("medium"), RefineParams(photometric=30.0)),
-        "DIS fine + arm masks": (
+        "DIS fine + arm masks (the per-frame defaults before the normal flow)": (
             DISFlow("medium", finest_scale=1, patch_size=8, patch_stride=4),
             RefineParams(),
         ),
