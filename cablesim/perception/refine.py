@@ -19,7 +19,9 @@ gets no sample in that frame (its flow becomes NaN, which the accumulators skip)
   replaced by its component along the target's local edge normal: the dominant eigenvector of
   the colour structure tensor smoothed over ``normal_flow`` px.  Correlation needs one
   component per pixel anyway (it projects the motion on its principal direction), and this
-  one is observed.  Ground-truth flow (``FlowEstimator.image_based`` False) is left whole.
+  one is observed (the "normal flow" of the aperture problem; not the MovingCables layout's
+  ``normal_flow`` files).  Ground-truth flow (``FlowEstimator.image_based`` False) is left
+  whole.
 - **photometric check** (``photometric``): the claimed motion must explain the image:
   ``max_c |target_c(p) - frame_c(p + phi)| <= photometric`` grey levels after a Gaussian blur
   of ``photometric_blur`` px (sensor noise).
