@@ -7,9 +7,9 @@ the running accumulators.  With ``pipelined=True`` the flow runs in a worker thr
 while the accumulators consume the results in order (stage 2) through a bounded queue; errors
 in either stage propagate and the results are identical to the sequential path.
 
-Every flow passes the per-sample checks of ``refine`` (:mod:`cablesim.perception.refine`:
-arm masks, optionally a photometric or forward-backward check; a rejected pixel gets no sample
-in that frame) and only the target pixels of ``StreamStatistics.support`` (the arm's absence,
+Every flow passes the per-sample steps of ``refine`` (:mod:`cablesim.perception.refine`: the
+normal flow of image-based back ends, arm masks, optionally a photometric or forward-backward
+check; a rejected pixel gets no sample in that frame) and only the target pixels of ``StreamStatistics.support`` (the arm's absence,
 optionally the depth foreground) may vote: the remedies against motion bleeding across hose
 boundaries.  ``refine=None`` means :data:`~cablesim.perception.refine.DEFAULT_REFINE`.  With
 ``RefineParams.grow`` the masks of the current methods then grow along the target frame's
@@ -226,7 +226,8 @@ def iter_flows(
     refine: RefineParams | None = None,
 ) -> Iterator[tuple[Job, np.ndarray]]:
     """(job, flow to target) for every kept frame, in stream order; with ``refine`` the
-    per-sample checks (arm masks, photometric, forward-backward) set rejected pixels to NaN."""
+    per-sample steps run (the normal flow; arm masks, photometric and forward-backward checks
+    set rejected pixels to NaN)."""
     est = make_flow(flow)
     jobs = plan_jobs(stream, delta_g)
     target = stream.target
