@@ -125,7 +125,7 @@ def report(meta: dict, runs: list[dict], baseline: Path | None) -> str:
         "(along, across) of 3 periods at +-2 cm and 5 cm/s, camera at 15 frames/s of simulated "
         "time with the 1 mm rule, release, retreat, settle, target frame, ground-truth flow to "
         "every kept frame, then the default CPU perception "
-        "(`segment_stream(stream, method='correlation', flow='dis')`: DIS preset fine, arm masks and depth foreground where present; DIS medium and no refine before issue 10). "
+        "(`segment_stream(stream, method='correlation', flow='dis')`: DIS preset fine, normal flow, arm masks and depth foreground where present; DIS medium and no refine before issue 10). "
         "`benchmarks/bench_episode.py --write`.",
         "",
         f"- date: {meta['date']}; cablesim commit {meta['commit']}",
