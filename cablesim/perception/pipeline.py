@@ -9,9 +9,9 @@ in either stage propagate and the results are identical to the sequential path.
 
 Every flow passes the per-sample steps of ``refine`` (:mod:`cablesim.perception.refine`: the
 normal flow of image-based back ends, arm masks, optionally a photometric or forward-backward
-check; a rejected pixel gets no sample in that frame) and only the target pixels of ``StreamStatistics.support`` (the arm's absence,
-optionally the depth foreground) may vote: the remedies against motion bleeding across hose
-boundaries.  ``refine=None`` means :data:`~cablesim.perception.refine.DEFAULT_REFINE`.  With
+check; a rejected pixel gets no sample in that frame) and only the target pixels of
+``StreamStatistics.support`` (the arm's absence, optionally the depth foreground) may vote:
+the remedies against motion bleeding across hose boundaries.  ``refine=None`` means :data:`~cablesim.perception.refine.DEFAULT_REFINE`.  With
 ``RefineParams.grow`` the masks of the current methods then grow along the target frame's
 colour (an option: it relies on the hoses differing in colour).
 

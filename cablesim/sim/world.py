@@ -398,26 +398,23 @@ class World:
         with Newton on a dense Jacobian, which converges in a few iterations there, and the
         dense Newton goes on for ``physics.rescue_time`` (16 ms per step instead of ~2)."""
         m, d = self.model, self.data
-        if self._rescue_steps > 0:
-            mujoco.mj_step(m, d)
-            self._rescue_steps -= 1
-            if self._rescue_steps == 0:
-                m.opt.solver, m.opt.jacobian = self._solver, self._jacobian
-            return
-        rescue = self.cfg.physics.rescue_strain > 0 and len(self._edge_length0) > 0
-        mujoco.mj_getState(m, d, self._step_state, _STATE)
-        self._plain_step()
-        if rescue and self.hose_stretch().max() > self.cfg.physics.rescue_strain:
+        if self._rescue_steps == 0:
+            rescue = self.cfg.physics.rescue_strain > 0 and len(self._edge_length0) > 0
+            mujoco.mj_getState(m, d, self._step_state, _STATE)
+            self._plain_step()
+            if not (rescue and self.hose_stretch().max() > self.cfg.physics.rescue_strain):
+                return
+            # redo the step from the saved state, and go on, with the dense Newton
             mujoco.mj_setState(m, d, self._step_state, _STATE)
             self._fallback_steps = 0
             self._rescues += 1
             m.opt.solver = _SOLVERS["Newton"]
             m.opt.jacobian = int(mujoco.mjtJacobian.mjJAC_DENSE)
             self._rescue_steps = max(1, round(self.cfg.physics.rescue_time / m.opt.timestep))
-            mujoco.mj_step(m, d)
-            self._rescue_steps -= 1
-            if self._rescue_steps == 0:
-                m.opt.solver, m.opt.jacobian = self._solver, self._jacobian
+        mujoco.mj_step(m, d)
+        self._rescue_steps -= 1
+        if self._rescue_steps == 0:
+            m.opt.solver, m.opt.jacobian = self._solver, self._jacobian
 
     def _plain_step(self) -> None:
         """One step with the configured solver and the CG fallback (state saved by the caller
