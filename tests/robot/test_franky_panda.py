@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import gc
 import math
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -25,6 +26,7 @@ import pytest
 from cablesim.panda import HOME_QPOS, JOINT_LIMITS
 from cablesim.panda.ik import ArmModel
 from cablesim.panda.model import panda_spec
+from cablesim.robot.base import MoveResult
 from cablesim.robot.franky_panda import FLANGE_T_TCP, FrankyPanda, franka_sim_mjcf
 from cablesim.twin.franka_sim import HOST, FrankaSimServer, FrankaSimUnavailable
 
@@ -126,9 +128,26 @@ def robot(franka_sim_server: Path) -> Iterator[FrankyPanda]:
     gc.collect()
 
 
+def _host_missed_cycles(reason: str) -> bool:
+    """Whether a reflex came with libfranka reporting that this host missed >= 5 % of the
+    1 kHz command cycles (``control_command_success_rate`` below 0.95).  libfranka documents
+    that as the host's timing (no realtime kernel here, a shared CI machine), not the motion:
+    the server extrapolates the missed cycles and the late commands then jump."""
+    match = re.search(r"control_command_success_rate: ([0-9.]+)", reason)
+    return match is not None and float(match.group(1)) < 0.95 and reason.endswith("; recovered")
+
+
+def _home(robot: FrankyPanda, speed: float = 0.5) -> MoveResult:
+    """Home; once more if the first try was aborted only because this host missed cycles."""
+    result = robot.home(speed)
+    if not result and _host_missed_cycles(result.reason):
+        result = robot.home(speed)
+    return result
+
+
 @pytest.fixture
 def at_home(robot: FrankyPanda) -> FrankyPanda:
-    result = robot.home(0.5)
+    result = _home(robot)
     assert result, result.reason
     return robot
 
@@ -232,7 +251,7 @@ def test_reflex_is_reported_and_recovered(at_home: FrankyPanda) -> None:
     assert not result
     assert "reflex" in result.reason and result.reason.endswith("; recovered"), result.reason
     assert not robot.robot.has_errors
-    home = robot.home(0.5)
+    home = _home(robot)
     assert home, home.reason
     start = robot.ee_pose()
     again = robot.move_to(start.translated([0.0, 0.0, 0.03]), speed=0.1)
@@ -248,3 +267,16 @@ def test_ik_solution_is_consistent(at_home: FrankyPanda) -> None:
     assert dist < 1e-3 and angle < 1e-2
     ok, reason = robot.check_reachable(target)
     assert ok, reason
+
+
+def test_host_timing_retry_is_narrow() -> None:
+    """The one retry above is for cycles this host missed, never for a motion that broke a
+    limit on its own or for a reflex the adapter could not recover from."""
+    timing = (
+        "robot aborted the motion: ControlException: libfranka: Move command aborted: motion "
+        'aborted by reflex! ["joint_velocity_violation"]\\ncontrol_command_success_rate: 0.85'
+    )
+    assert _host_missed_cycles(timing + "; recovered")
+    assert not _host_missed_cycles(timing.replace("0.85", "0.99") + "; recovered")
+    assert not _host_missed_cycles(timing + "; recovery FAILED")
+    assert not _host_missed_cycles("joint target not reached (error 0.100 rad)")
