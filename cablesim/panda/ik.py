@@ -8,8 +8,9 @@ connectors) copied in as primitive geoms.  Checking a configuration never touche
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mink
 import mujoco
@@ -97,6 +98,10 @@ def static_obstacles(
         name = model.geom(g).name or f"geom{g}"
         out.append(Obstacle(name, gtype, size, tuple(pos), tuple(quat)))
     return out
+
+
+#: how many distinct IK problems an :class:`ArmModel` remembers the answers to
+IK_MEMO_SIZE = 4096
 
 
 @dataclass(frozen=True)
@@ -193,6 +198,12 @@ class ArmModel:
         )
         self.posture_task = mink.PostureTask(m, cost=1e-3)
         self.limits = [mink.ConfigurationLimit(m, gain=0.5)]
+        # solve() is a pure function of its inputs (the hose capsules and obstacles only enter
+        # the checks), and planning asks the same question often (the start-segment picker's
+        # dry runs: 1131 solves of 805 distinct problems for seed 2), so answers are kept
+        self._solved: OrderedDict[bytes, IKResult] = OrderedDict()
+        self.solve_calls = 0  # solve() calls, and how many were answered from the memo
+        self.solve_hits = 0
 
     # ---- hoses ---------------------------------------------------------------------------
     @property
@@ -282,9 +293,38 @@ class ArmModel:
         opening: float = 0.08,
     ) -> IKResult:
         """Differential IK from ``q_init`` to ``target``; joint limits are respected (a
-        ``q_init`` measured a hair outside them, as a real arm's can be, starts clipped)."""
+        ``q_init`` measured a hair outside them, as a real arm's can be, starts clipped).
+
+        The same problem (bit for bit: target, start, posture, opening, tolerances) gets the
+        same answer from a memo of the last :data:`IK_MEMO_SIZE` problems, without iterating."""
+        self.solve_calls += 1
+        q_start = np.clip(np.asarray(q_init, dtype=float).reshape(7), _Q_LO, _Q_HI)
+        key = b"".join(
+            np.ascontiguousarray(a, dtype=float).tobytes()
+            for a in (
+                target.position,
+                target.quaternion,
+                q_start,
+                np.full(7, np.nan) if q_posture is None else np.reshape(q_posture, 7),
+                (opening, self.position_tolerance, self.rotation_tolerance, self.max_iterations),
+            )
+        )
+        known = self._solved.get(key)
+        if known is not None:
+            self.solve_hits += 1
+            self._solved.move_to_end(key)
+            return replace(known, q=known.q.copy())
+        result = self._solve(target, q_start, q_posture, opening)
+        self._solved[key] = replace(result, q=result.q.copy())
+        if len(self._solved) > IK_MEMO_SIZE:
+            self._solved.popitem(last=False)
+        return result
+
+    def _solve(
+        self, target: Pose, q_start: np.ndarray, q_posture: np.ndarray | None, opening: float
+    ) -> IKResult:
         qpos = self.data.qpos.copy()
-        qpos[self._arm_qadr] = np.clip(np.asarray(q_init, dtype=float), _Q_LO, _Q_HI)
+        qpos[self._arm_qadr] = q_start
         qpos[self._finger_qadr] = opening / 2.0
         self.configuration.update(qpos)
         posture = qpos.copy()
