@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
+from _machine import cpu_model, git_commit  # noqa: E402  (benchmarks/ is on sys.path)
 
 
 def single_thread_environment() -> None:
@@ -209,25 +209,3 @@ def run_meta(**extra: Any) -> dict[str, Any]:
         "versions": versions_line(),
         **extra,
     }
-
-
-def git_commit() -> str:
-    import cablesim
-
-    root = os.path.dirname(os.path.dirname(os.path.abspath(cablesim.__file__)))
-    try:
-        out = subprocess.run(
-            ["git", "-C", root, "rev-parse", "--short", "HEAD"],
-            capture_output=True,
-            text=True,
-            check=False,
-        )
-        dirty = subprocess.run(
-            ["git", "-C", root, "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            check=False,
-        ).stdout.strip()
-        return out.stdout.strip() + (" (with uncommitted changes)" if dirty else "")
-    except OSError:
-        return "unknown"
