@@ -197,7 +197,29 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, default=None, help="write the rows here as they come")
     ap.add_argument("--write", action="store_true", help="write benchmarks/results/seeds.md/json")
     ap.add_argument("--md", type=Path, default=None, help="write the markdown table here")
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="change a field of the episode config (repeatable), e.g. --set "
+        "scene.camera.width=320; `cablesim explore --show-config` lists the fields (without "
+        "their `episode.` prefix here)",
+    )
     args = ap.parse_args(argv)
+    config = None
+    if args.set:  # a bad field or value stops here, before any worker starts
+        from cablesim.config import override
+        from cablesim.errors import ConfigError
+        from cablesim.sim.session import EpisodeConfig
+
+        try:
+            cfg = EpisodeConfig()
+            for assignment in args.set:
+                cfg = override(cfg, assignment)
+            config = cfg.validate().to_dict()
+        except ConfigError as e:
+            ap.error(f"--set: {e}")
     seeds = (
         args.seeds if args.seeds is not None else list(range(args.first, args.first + args.count))
     )
@@ -215,6 +237,7 @@ def main(argv: list[str] | None = None) -> int:
         "workers": args.workers,
         "load_start": " ".join(f"{x:.2f}" for x in os.getloadavg()),
         "cache": cache or os.environ.get("CABLESIM_CACHE", "~/.cache/cablesim (default)"),
+        "config_changes": list(args.set),
     }
     t0 = time.perf_counter()
     rows: dict[int, dict[str, Any]] = {}
@@ -236,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
     ctx = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx, initializer=_worker_init)
     try:  # the pool is shut down below, also on Ctrl-C
-        futures = {pool.submit(run_seed, s, cache): s for s in seeds}
+        futures = {pool.submit(run_seed, s, cache, config): s for s in seeds}
         for fut in as_completed(futures):
             s = futures[fut]
             try:

@@ -1,0 +1,243 @@
+"""What one interaction costs under other protocol settings, and what each gives up: the
+episode benchmark's stages (``bench_episode.py``) for a list of named config variants, with
+the follow gains and the default correlation's scores against the ground truth beside the
+CPU time.  This is the basis for the protocol decision the 12 s target of issue 9 needs
+(``benchmarks/results/episode.md``: the default costs ~22 s on this machine).
+
+    .venv/bin/python benchmarks/episode_variants.py [--seeds 2 8] [--write]
+        [--variant NAME FIELD=VALUE ...]
+
+Each variant is a list of ``--set`` assignments on the episode config (``cablesim explore
+--show-config`` lists the fields, without the ``episode.`` prefix here).  Every (variant,
+seed) runs once (a run is deterministic: ``bench_episode.py`` checks that), pinned to one
+core, single-threaded.  The scores are of one interaction per seed: indicative, not a
+benchmark of the method (``realistic_flow.py`` and ``cablesim benchmark thesis`` are).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _interaction import (  # noqa: E402
+    pin_to_one_core,
+    run_interaction,
+    run_meta,
+    single_thread_environment,
+    uptime,
+)
+from _machine import write_results  # noqa: E402
+
+single_thread_environment()
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import statistics  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import cablesim  # noqa: E402, F401  (selects the headless GL back end)
+
+RESULTS = Path(__file__).parent / "results" / "episode_variants.md"
+STAGES = ("physics_control", "rendering", "ground_truth", "perception", "total")
+
+#: name -> assignments on the episode config
+VARIANTS: dict[str, tuple[str, ...]] = {
+    "default": (),
+    "2 periods": ("interaction.actions.periods=2",),
+    "480x360": ("scene.camera.width=480", "scene.camera.height=360"),
+    "480x360, 2 periods": (
+        "scene.camera.width=480",
+        "scene.camera.height=360",
+        "interaction.actions.periods=2",
+    ),
+    "320x240": ("scene.camera.width=320", "scene.camera.height=240"),
+    "320x240, 2 periods": (
+        "scene.camera.width=320",
+        "scene.camera.height=240",
+        "interaction.actions.periods=2",
+    ),
+    "2 mm rule": ("interaction.capture.min_gripper_step=0.002",),
+    "fast transit": (
+        "interaction.retreat.speed_factor=1.0",
+        "interaction.grasp.travel_speed=0.5",
+    ),
+}
+
+
+def _config(assignments: tuple[str, ...], seed: int) -> Any:
+    """The default episode config of ``seed`` with ``assignments`` applied, validated."""
+    from cablesim.config import override
+    from cablesim.sim.session import EpisodeConfig
+
+    cfg = EpisodeConfig(seed=seed)
+    for a in assignments:
+        cfg = override(cfg, a)
+    return cfg.validate()
+
+
+def run_variant(assignments: tuple[str, ...], seed: int) -> dict:
+    """One interaction of ``seed`` under ``assignments``, timed by stage and scored."""
+    from cablesim.sim.session import SimSession
+
+    session = SimSession.build(_config(assignments, seed))
+    try:
+        segment = session.pick_start()
+        run, res, seg = run_interaction(session, segment.mask)
+        row = {
+            "seed": seed,
+            "hose": session.hose,
+            "success": run.success,
+            "reason": run.reason,
+            "cpu": run.cpu,
+        }
+        if run.success and seg is not None:
+            ev = session.evaluator()
+            truth = ev.stream_truth(res.stream)
+            row.update(
+                sim_time=run.sim_time,
+                physics_steps=run.physics_steps,
+                ticks=run.ticks,
+                frames=run.frames,
+                gains=run.gains,
+                union=ev.score(seg.mask("union"), truth),
+                intersection=ev.score(seg.mask("intersection"), truth),
+            )
+        return row
+    finally:
+        session.close()
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[2, 8])
+    ap.add_argument(
+        "--variant",
+        nargs="+",
+        action="append",
+        metavar=("NAME", "FIELD=VALUE"),
+        help="run only this variant (repeatable); a name from the built-in list, or a new "
+        "name followed by its assignments",
+    )
+    ap.add_argument("--write", action="store_true", help=f"write {RESULTS}")
+    ap.add_argument("--json-out", type=Path, help="save the rows as JSON")
+    ap.add_argument("--no-pin", action="store_true", help="do not pin to one CPU core")
+    args = ap.parse_args()
+
+    variants: dict[str, tuple[str, ...]] = {}
+    for name, *assignments in args.variant or [[n] for n in VARIANTS]:
+        if not assignments and name not in VARIANTS:
+            ap.error(f"--variant {name!r}: not a built-in variant ({', '.join(VARIANTS)})")
+        variants[name] = tuple(assignments) if assignments else VARIANTS[name]
+    from cablesim.errors import ConfigError
+
+    for name, assignments in variants.items():  # a bad field stops here, before any scene
+        try:
+            _config(assignments, 0)
+        except ConfigError as e:
+            ap.error(f"--variant {name!r}: {e}")
+
+    core = None if args.no_pin else pin_to_one_core()
+    load_start = uptime()
+    rows = []
+    for name, assignments in variants.items():
+        for seed in args.seeds:
+            row = run_variant(assignments, seed) | {"variant": name, "set": list(assignments)}
+            rows.append(row)
+            c = row["cpu"]
+            print(
+                f"{name} / seed {seed}: {'ok' if row['success'] else 'FAILED ' + row['reason']}; "
+                f"CPU {c.get('total', c['interaction']):.1f} s"
+                + (
+                    f"; frames {row['frames']}; union F0.4 {row['union']['f0.4']:.3f}"
+                    if "union" in row
+                    else ""
+                ),
+                flush=True,
+            )
+    meta = run_meta(pinned_core=core, load_start=load_start, load_end=uptime(), seeds=args.seeds)
+    if args.json_out:
+        args.json_out.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+    text = report(meta, rows, variants)
+    print(text)
+    if args.write:
+        write_results(RESULTS, text)
+    return 0
+
+
+def _median(values: list[float]) -> float:
+    return statistics.median(values) if values else float("nan")
+
+
+def report(meta: dict, rows: list[dict], variants: dict[str, tuple[str, ...]]) -> str:
+    lines = [
+        "# Episode variants: what each protocol setting costs and gives up",
+        "",
+        "The episode benchmark's stages (`bench_episode.py`: physics + control, rendering, "
+        "ground truth, the default CPU perception) for config variants, one interaction per "
+        "(variant, seed), pinned to one core.  Scores: the default correlation's union and "
+        "intersection masks against the grasped hose in the target frame (one interaction per "
+        "seed: indicative only).  `benchmarks/episode_variants.py --write`.",
+        "",
+        f"- date: {meta['date']}; cablesim commit {meta['commit']}",
+        f"- machine: {meta['machine']}; run pinned to core {meta['pinned_core']}",
+        f"- {meta['versions']}",
+        f"- load (shared machine), start: `{meta['load_start']}`; end: `{meta['load_end']}`",
+        f"- seeds: {', '.join(str(s) for s in meta['seeds'])}",
+        "",
+        "Medians over the seeds (CPU seconds):",
+        "",
+        "| variant | settings | ok | sim s | frames | physics | render | truth | perception "
+        "| **total** | gain min | union P / F0.4 | intersection P / F0.4 |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, assignments in variants.items():
+        vr = [r for r in rows if r["variant"] == name]
+        ok = [r for r in vr if "union" in r]
+        if not ok:
+            lines.append(
+                f"| {name} | {'<br>'.join(assignments) or '-'} | 0/{len(vr)} | | | | | | | | | | |"
+            )
+            continue
+
+        def med(key: str, rs: list[dict] = ok) -> float:
+            return _median([r["cpu"][key] for r in rs])
+
+        u_p = _median([r["union"]["precision"] for r in ok])
+        u_f = _median([r["union"]["f0.4"] for r in ok])
+        i_p = _median([r["intersection"]["precision"] for r in ok])
+        i_f = _median([r["intersection"]["f0.4"] for r in ok])
+        lines.append(
+            f"| {name} | {'<br>'.join(f'`{a}`' for a in assignments) or '-'} | "
+            f"{len(ok)}/{len(vr)} | {_median([r['sim_time'] for r in ok]):.1f} | "
+            f"{_median([r['frames'] for r in ok]):.0f} | "
+            + " | ".join(f"{med(k):.1f}" for k in STAGES[:-1])
+            + f" | **{med('total'):.1f}** | {min(min(r['gains']) for r in ok):.3f} | "
+            f"{u_p:.3f} / {u_f:.3f} | {i_p:.3f} / {i_f:.3f} |"
+        )
+    lines += [
+        "",
+        "Per seed:",
+        "",
+        "| variant | seed | hose | frames | total CPU s | gains | union P / R / F0.4 |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        if "union" not in r:
+            lines.append(
+                f"| {r['variant']} | {r['seed']} | {r['hose']} | | | | failed: {r['reason']} |"
+            )
+            continue
+        u = r["union"]
+        lines.append(
+            f"| {r['variant']} | {r['seed']} | {r['hose']} | {r['frames']} | "
+            f"{r['cpu']['total']:.1f} | {', '.join(f'{g:.3f}' for g in r['gains'])} | "
+            f"{u['precision']:.3f} / {u['recall']:.3f} / {u['f0.4']:.3f} |"
+        )
+    lines.append("")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
