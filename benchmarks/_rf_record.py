@@ -26,12 +26,18 @@ CACHE = Path(os.environ.get("CABLESIM_STREAMS", Path.home() / ".cache" / "cables
 TAG = "rf1"
 
 
+#: recorded settings: "default" (640x480, 3 periods per action), "thesis" (the D456 at
+#: 1280x720) and "fast" (320x240 and 2 periods per action: the setting that meets issue 9's
+#: 12 s per interaction here, benchmarks/results/episode_variants.md)
+GEOMETRIES = ("default", "thesis", "fast")
+
+
 @dataclass(frozen=True)
 class Scene:
     split: str  # "val" | "test"
     seed: int
     board: str  # "wood" | "solid"
-    geometry: str = "default"  # "default" (640x480) | "thesis" (1280x720)
+    geometry: str = "default"  # a key of GEOMETRIES
 
     @property
     def name(self) -> str:
@@ -60,16 +66,23 @@ class Scene:
         return "todo"
 
     def config(self):
-        from cablesim.episode.config import CaptureConfig, InteractionConfig
+        from cablesim.episode.config import ActionConfig, CaptureConfig, InteractionConfig
         from cablesim.sim.config import BoardConfig, CameraConfig, SceneConfig
         from cablesim.sim.perturb import PerturbConfig
         from cablesim.sim.session import EpisodeConfig
 
-        camera = CameraConfig.thesis() if self.geometry == "thesis" else CameraConfig()
+        if self.geometry not in GEOMETRIES:
+            raise ValueError(f"geometry {self.geometry!r}: not one of {GEOMETRIES}")
+        camera, actions = CameraConfig(), ActionConfig()
+        if self.geometry == "thesis":
+            camera = CameraConfig.thesis()
+        elif self.geometry == "fast":
+            camera = CameraConfig(width=320, height=240)
+            actions = ActionConfig(periods=2)
         return EpisodeConfig(
             seed=self.seed,
             scene=SceneConfig(board=BoardConfig(background=self.board), camera=camera),
-            interaction=InteractionConfig(capture=CaptureConfig(arm_masks=True)),
+            interaction=InteractionConfig(actions=actions, capture=CaptureConfig(arm_masks=True)),
             perturb=PerturbConfig(enabled=True),
         )
 

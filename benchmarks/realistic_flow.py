@@ -44,7 +44,7 @@ from _rf_eval import (  # noqa: E402
     tune,
     union_mask,
 )
-from _rf_record import Scene, record, recorded  # noqa: E402
+from _rf_record import GEOMETRIES, Scene, record, recorded  # noqa: E402
 
 # scene counts: what a shared 2-core machine allowed (one interaction ~45 s CPU to simulate)
 VAL_SEEDS, VAL_WANT, VAL_SOLID = range(300, 400), 12, 6
@@ -92,8 +92,8 @@ ORACLE = ("oracle", "raw", "none")
 METHODS = ("correlation", "segmentation", "ablation")
 
 
-def _scenes(split: str) -> tuple[list[Scene], list[Scene]]:
-    return recorded(split, "wood"), recorded(split, "solid")
+def _scenes(split: str, geometry: str = "default") -> tuple[list[Scene], list[Scene]]:
+    return recorded(split, "wood", geometry), recorded(split, "solid", geometry)
 
 
 def _stats(scene: Scene, noisy: bool, combo: tuple):
@@ -227,7 +227,7 @@ def main() -> None:
     r = sub.add_parser("record")
     r.add_argument("--workers", type=int, default=2)
     r.add_argument("--split", choices=("val", "test", "both"), default="both")
-    r.add_argument("--geometry", choices=("default", "thesis"), default="default")
+    r.add_argument("--geometry", choices=GEOMETRIES, default="default")
     r.add_argument("--scale", type=float, default=1.0, help="fraction of the scene counts")
     e = sub.add_parser("evaluate")
     e.add_argument("--skip-explore", action="store_true")
@@ -236,6 +236,12 @@ def main() -> None:
         "--noisy-only",
         action="store_true",
         help="only the camera's noise models on (SPEC 7); skip the noise-free twins",
+    )
+    e.add_argument(
+        "--geometry",
+        choices=GEOMETRIES,
+        default="default",
+        help="which recorded setting to evaluate (`fast`: 320x240, 2 periods per action)",
     )
     e.add_argument("--out", type=Path, default=RESULTS / "realistic_flow.md")
     args = ap.parse_args()
@@ -258,12 +264,13 @@ def main() -> None:
 
     t_start = time.time()
     load0 = os.getloadavg()
-    vw, vs = _scenes("val")
-    tw, ts = _scenes("test")
+    vw, vs = _scenes("val", args.geometry)
+    tw, ts = _scenes("test", args.geometry)
     val, test = vw + vs, tw + ts
     log(f"validation: {len(vw)} wood + {len(vs)} solid; test: {len(tw)} wood + {len(ts)} solid")
     report: dict[str, Any] = {
         "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "geometry": args.geometry,
         "machine": f"{platform.platform()}, CPU {cpu_model()}, {os.cpu_count()} cores",
         "scenes": {
             "val_wood": [s.seed for s in vw],
