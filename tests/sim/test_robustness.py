@@ -111,6 +111,18 @@ def test_the_seed_run_records_every_failure_and_goes_on(seeds_bench) -> None:
     assert "0 of 3 gave a successful interaction" in md and "scene_unsettled 1" in md
 
 
+def test_the_seed_run_refuses_a_bad_config_change_before_any_seed(seeds_bench, capsys) -> None:
+    """``--set`` names the bad field and the run stops before a worker starts (no rows)."""
+    with pytest.raises(SystemExit) as e:
+        seeds_bench.main(["--seeds", "1", "--set", "interaction.actions.perods=2"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "interaction.actions.perods" in err and "periods" in err
+    with pytest.raises(SystemExit):
+        seeds_bench.main(["--seeds", "1", "--set", "interaction.actions.periods=0"])
+    assert "periods" in capsys.readouterr().err
+
+
 def _meta() -> dict:
     return {
         "command": "test",
