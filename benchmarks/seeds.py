@@ -145,8 +145,14 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     lines = [
         "# Every seed gives an interaction",
         "",
-        "One default interaction per seed (`cablesim episode --seed S`: 4 hoses, 640x480, hose of "
-        "interest and start segment drawn from the seed; scene re-drawn by the session's "
+        (
+            "One interaction per seed of the default config changed by "
+            + ", ".join(f"`{c}`" for c in meta["config_changes"])
+            + " (otherwise as `cablesim episode --seed S`: "
+            if meta.get("config_changes")
+            else "One default interaction per seed (`cablesim episode --seed S`: 4 hoses, 640x480, "
+        )
+        + "hose of interest and start segment drawn from the seed; scene re-drawn by the session's "
         "documented rule when a draw does not settle or has no qualifying hose; a grasp that "
         "does not hold is retried at neighbouring points; a hose that slips in the gripper during an "
         "action, follow R^2 < `grasp.min_follow_r2`, is `grasp_not_held`).  "
