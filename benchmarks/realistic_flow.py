@@ -33,6 +33,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _machine import cpu_model  # noqa: E402
 from _rf_eval import (  # noqa: E402
     BETAS,
+    FLOWS,
+    SAMPLES,
     SUPPORTS,
     ensure_stats,
     fp_near_hose,
@@ -243,6 +245,13 @@ def main() -> None:
         default="default",
         help="which recorded setting to evaluate (`fast`: 320x240, 2 periods per action)",
     )
+    e.add_argument(
+        "--after",
+        metavar="FLOW/SAMPLE/SUPPORT",
+        default="/".join(AFTER),
+        help="the configuration reported as 'after' (default: the chosen defaults, "
+        f"{'/'.join(AFTER)}); e.g. another setting's validation winner",
+    )
     e.add_argument("--out", type=Path, default=RESULTS / "realistic_flow.md")
     args = ap.parse_args()
 
@@ -262,6 +271,18 @@ def main() -> None:
             log(f"{k}: {len(v)} scenes, seeds {[s.seed for s in v]}")
         return
 
+    after = tuple(args.after.split("/"))
+    if (
+        len(after) != 3
+        or after[0] not in FLOWS
+        or after[1] not in SAMPLES
+        or (after[2] not in SUPPORTS)
+    ):
+        ap.error(
+            f"--after {args.after!r}: FLOW/SAMPLE/SUPPORT with FLOW one of {sorted(FLOWS)}, "
+            f"SAMPLE one of {sorted(SAMPLES)} and SUPPORT one of {sorted(SUPPORTS)}"
+        )
+    colour = (*after, COLOUR[3])
     t_start = time.time()
     load0 = os.getloadavg()
     vw, vs = _scenes("val", args.geometry)
@@ -280,8 +301,8 @@ def main() -> None:
         },
         "before": list(BEFORE),
         "previous": list(PREVIOUS),
-        "after": list(AFTER),
-        "colour": list(COLOUR),
+        "after": list(after),
+        "colour": list(colour),
         "supports": {k: (v.describe() if v else None) for k, v in SUPPORTS.items()},
     }
     if not args.skip_explore:
@@ -290,11 +311,11 @@ def main() -> None:
     combos = {
         "before": BEFORE,
         "previous": PREVIOUS,
-        "after": AFTER,
-        "after+colour": COLOUR,
+        "after": after,
+        "after+colour": colour,
         "oracle": ORACLE,
     }
-    combos["oracle+support"] = ("oracle", "arm", AFTER[2])
+    combos["oracle+support"] = ("oracle", "arm", after[2])
     timings = {}
     noises = (True,) if args.noisy_only else (True, False)
     report["noise"] = ["noisy"] if args.noisy_only else ["noisy", "clean"]
