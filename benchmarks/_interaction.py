@@ -22,6 +22,7 @@ import platform
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -109,6 +110,19 @@ def stream_digest(stream: Any, votes: np.ndarray | None) -> str:
     if votes is not None:
         h.update(np.ascontiguousarray(votes).tobytes())
     return h.hexdigest()
+
+
+def episode_config(assignments: Sequence[str] = (), seed: int = 0) -> Any:
+    """The default ``EpisodeConfig`` of ``seed`` with ``FIELD=VALUE`` assignments applied (the
+    fields of ``cablesim explore --show-config`` without their ``episode.`` prefix), validated;
+    a bad field or value raises ``cablesim.errors.ConfigError`` naming it."""
+    from cablesim.config import override
+    from cablesim.sim.session import EpisodeConfig
+
+    cfg = EpisodeConfig(seed=seed)
+    for assignment in assignments:
+        cfg = override(cfg, assignment)
+    return cfg.validate()
 
 
 def run_interaction(session: Any, segment_mask: np.ndarray, perception: bool = True) -> Any:

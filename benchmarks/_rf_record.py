@@ -27,8 +27,8 @@ TAG = "rf1"
 
 
 #: recorded settings: "default" (640x480, 3 periods per action), "thesis" (the D456 at
-#: 1280x720) and "fast" (320x240 and 2 periods per action: the setting that meets issue 9's
-#: 12 s per interaction here, benchmarks/results/episode_variants.md)
+#: 1280x720) and "fast" (320x240 and 2 periods per action: the setting that brings one
+#: interaction near issue 9's 12 s here, benchmarks/results/episode_variants.md)
 GEOMETRIES = ("default", "thesis", "fast")
 
 

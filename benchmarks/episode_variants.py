@@ -21,6 +21,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from _interaction import (  # noqa: E402
+    episode_config,
     pin_to_one_core,
     run_interaction,
     run_meta,
@@ -35,7 +36,6 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import statistics  # noqa: E402
 from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
 
 import cablesim  # noqa: E402, F401  (selects the headless GL back end)
 
@@ -66,22 +66,11 @@ VARIANTS: dict[str, tuple[str, ...]] = {
 }
 
 
-def _config(assignments: tuple[str, ...], seed: int) -> Any:
-    """The default episode config of ``seed`` with ``assignments`` applied, validated."""
-    from cablesim.config import override
-    from cablesim.sim.session import EpisodeConfig
-
-    cfg = EpisodeConfig(seed=seed)
-    for a in assignments:
-        cfg = override(cfg, a)
-    return cfg.validate()
-
-
 def run_variant(assignments: tuple[str, ...], seed: int) -> dict:
     """One interaction of ``seed`` under ``assignments``, timed by stage and scored."""
     from cablesim.sim.session import SimSession
 
-    session = SimSession.build(_config(assignments, seed))
+    session = SimSession.build(episode_config(assignments, seed))
     try:
         segment = session.pick_start()
         run, res, seg = run_interaction(session, segment.mask)
@@ -134,7 +123,7 @@ def main() -> int:
 
     for name, assignments in variants.items():  # a bad field stops here, before any scene
         try:
-            _config(assignments, 0)
+            episode_config(assignments)
         except ConfigError as e:
             ap.error(f"--variant {name!r}: {e}")
 

@@ -272,12 +272,7 @@ def main() -> None:
         return
 
     after = tuple(args.after.split("/"))
-    if (
-        len(after) != 3
-        or after[0] not in FLOWS
-        or after[1] not in SAMPLES
-        or (after[2] not in SUPPORTS)
-    ):
+    if len(after) != 3 or not (after[0] in FLOWS and after[1] in SAMPLES and after[2] in SUPPORTS):
         ap.error(
             f"--after {args.after!r}: FLOW/SAMPLE/SUPPORT with FLOW one of {sorted(FLOWS)}, "
             f"SAMPLE one of {sorted(SAMPLES)} and SUPPORT one of {sorted(SUPPORTS)}"

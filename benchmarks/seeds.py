@@ -36,7 +36,8 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
-from _machine import cpu_model, git_commit  # noqa: E402  (benchmarks/ is on sys.path)
+from _interaction import episode_config  # noqa: E402  (benchmarks/ is on sys.path)
+from _machine import cpu_model, git_commit  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -215,15 +216,10 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     config = None
     if args.set:  # a bad field or value stops here, before any worker starts
-        from cablesim.config import override
         from cablesim.errors import ConfigError
-        from cablesim.sim.session import EpisodeConfig
 
         try:
-            cfg = EpisodeConfig()
-            for assignment in args.set:
-                cfg = override(cfg, assignment)
-            config = cfg.validate().to_dict()
+            config = episode_config(args.set).to_dict()
         except ConfigError as e:
             ap.error(f"--set: {e}")
     seeds = (
