@@ -321,6 +321,8 @@ def _grasp_at(
         if not backed:
             attempts[-1]["back_out"] = backed.reason
             break
+        if "short_by" in backed.details:
+            attempts[-1]["back_out_short_by_m"] = backed.details["short_by"]
         at_pregrasp = True
     result.details.pop("pose", None)
     result.details.pop("retriable", None)
@@ -335,9 +337,17 @@ def _back_out(robot: Robot, cfg: GraspConfig, g: Pose | None) -> PrimitiveResult
         return PrimitiveResult(False, "back out: no grasp pose")
     pre = g.translated(-cfg.pregrasp_offset * g.rotation[:, 2])
     r = robot.move_to(pre, speed=cfg.approach_speed)
-    if not r:
+    # stopping a few mm short of the pre-grasp (a hose brushing the open hand) still leaves
+    # the hand clear of the hose for the next attempt, which starts with a move to its own
+    # pre-grasp; a refused or colliding motion does not
+    if not r and not _stopped_short(r, cfg.hold_check_distance):
         return PrimitiveResult.fail("back out", r)
-    return PrimitiveResult(True)
+    return PrimitiveResult(True, details={"short_by": float(r.position_error)} if not r else {})
+
+
+def _stopped_short(r: MoveResult, within: float) -> bool:
+    """Whether a failed motion ran and only ended off its target, by at most ``within`` m."""
+    return r.reason.startswith("target not reached") and r.position_error <= within
 
 
 def _grasp_once(
@@ -396,10 +406,7 @@ def _grasp_once(
         if not r:  # a taut hose held the hand short of its target: the hold is judged all the same
             details["hold_check_short_by"] = float(r.position_error)
         r = robot.move_to(g, speed=cfg.approach_speed)
-        if not r and not (
-            r.reason.startswith("target not reached")
-            and r.position_error <= cfg.hold_check_distance
-        ):
+        if not r and not _stopped_short(r, cfg.hold_check_distance):
             return PrimitiveResult.fail("hold check return", r, **details)
         if err > cfg.hold_tolerance:
             return PrimitiveResult.fail(
@@ -440,9 +447,9 @@ def _run_waypoints(
         start = robot.ee_pose().position
         r = robot.move_to(w, speed=speed)
         if not r:
-            ok = r.reason.startswith("target not reached") and (
-                r.position_error <= tolerance
-                or _coverage(start, robot.ee_pose().position, w.position) >= min_coverage
+            ok = _stopped_short(r, tolerance) or (
+                r.reason.startswith("target not reached")
+                and _coverage(start, robot.ee_pose().position, w.position) >= min_coverage
             )
             if not ok:
                 return PrimitiveResult.fail(
