@@ -20,6 +20,7 @@ missing or the ports are taken, so that callers (tests) can skip.
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -27,6 +28,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from cablesim.errors import CablesimError
@@ -41,6 +43,7 @@ logging.basicConfig(level=logging.INFO, stream=sys.stdout,
                     format="%(asctime)s %(levelname)s %(name)s: %(message)s")
 threading.Timer({lifetime}, lambda: os._exit(3)).start()  # never outlive the caller
 from franka_sim import FrankaSimServer
+{monitor}
 
 def _interrupt(*_):
     raise KeyboardInterrupt
@@ -55,8 +58,105 @@ except KeyboardInterrupt:
     pass
 finally:
     server.stop()
+    close_trace()
     os._exit(0)
 """
+
+
+#: The cycle monitor, run inside the server process (franka-sim 1.1.7's own classes, wrapped):
+#: every state-publish tick (``CommConstraintTracker.tick``, one per 1 ms cycle) is remembered
+#: with whether the cycle it closed was lost (no answer from the client, so the server
+#: extrapolated the motion generator), and every motion-limit violation
+#: (``MotionLimitChecker.report``) is logged as one ``cablesim-cycles`` JSON line with what the
+#: last :data:`MONITOR_WINDOW` cycles before it looked like.  With ``trace`` set, every tick
+#: is also appended to a file (time, message id, active, lost) for the timing benchmark.
+#: Where franka-sim's internals differ, the monitor logs that it is unavailable and records
+#: nothing: :func:`host_timing` then never answers True.
+_MONITOR = """
+import collections, json, time
+monitor_log = logging.getLogger("cablesim.cycles")
+close_trace = lambda: None  # noqa: E731
+try:
+    from franka_sim import comm_constraints as _cc
+    from franka_sim.limits import checker as _ck
+    _tick, _report = _cc.CommConstraintTracker.tick, _ck.MotionLimitChecker.report
+except (ImportError, AttributeError) as exc:
+    monitor_log.warning("cablesim-cycles: unavailable (%s)", exc)
+else:
+    _recent = collections.deque(maxlen={window} + 1)
+    _trace = open({trace!r}, "w", buffering=1 << 16) if {trace!r} else None
+
+    def _monitored_tick(self, published_id):
+        outcome = _tick(self, published_id)
+        now = time.perf_counter()
+        lost = bool(outcome.active and outcome.lost)
+        _recent.append((now, lost))
+        if _trace is not None:
+            _trace.write(f"{{now:.6f}} {{published_id}} {{int(outcome.active)}} {{int(lost)}}\\n")
+        return outcome
+
+    def _monitored_report(self, violation, *, enforced):
+        if violation.error_index not in getattr(self, "_logged", ()):
+            ticks = list(_recent)
+            record = dict(
+                violation=violation.error_name,
+                enforced=bool(enforced),
+                lost_cycles=sum(lost for _, lost in ticks[1:]),
+                span_ms=round((ticks[-1][0] - ticks[0][0]) * 1e3, 3) if len(ticks) > 1 else 0.0,
+                cycles=len(ticks) - 1,
+                time=time.perf_counter(),
+            )
+            monitor_log.info("cablesim-cycles: %s", json.dumps(record))
+        return _report(self, violation, enforced=enforced)
+
+    _cc.CommConstraintTracker.tick = _monitored_tick
+    _ck.MotionLimitChecker.report = _monitored_report
+    if _trace is not None:
+        close_trace = _trace.close
+"""
+
+#: Cycles the monitor looks back from a violation.
+MONITOR_WINDOW = 3
+#: A state stream slower than this over the monitor's window (ms for MONITOR_WINDOW cycles,
+#: i.e. under a third of real time) counts as the server stalled by this host.
+STALL_SPAN_MS = 10.0
+
+
+@dataclass(frozen=True)
+class CycleViolation:
+    """One motion-limit violation as the server's cycle monitor saw it (see ``_MONITOR``)."""
+
+    violation: str  # franka-sim's error name, e.g. "joint_motion_generator_velocity_discontinuity"
+    enforced: bool  # whether it aborted the motion
+    lost_cycles: int  # cycles lost (extrapolated by the server) among the last ``cycles``
+    span_ms: float  # wall-clock time the last ``cycles`` state cycles took (1 ms each nominally)
+    cycles: int
+    time: float  # the server's perf_counter
+
+    @property
+    def host_timing(self) -> bool:
+        """Whether this violation is the host's timing, not the motion: a motion-generator
+        *discontinuity* (the only checks a late command can trip: libfranka documents that
+        dropped packets "could trigger discontinuity errors") right after a cycle the server
+        had to extrapolate, or after the state stream stalled to under a third of real time.
+        Measured here (``benchmarks/franka_sim_timing.py``): 46 of 46 timing reflexes met
+        this, against 17 % of ordinary cycle windows, so it can mislabel a genuine
+        discontinuity; a genuine one comes back on every attempt, so a bounded retry on it
+        still fails."""
+        return self.violation.endswith("_discontinuity") and (
+            self.lost_cycles > 0 or self.span_ms > STALL_SPAN_MS
+        )
+
+
+def parse_cycle_violations(log_text: str) -> list[CycleViolation]:
+    """The monitor's ``cablesim-cycles`` records in a server log, oldest first."""
+    out = []
+    for line in log_text.splitlines():
+        _, sep, payload = line.partition("cablesim-cycles: {")
+        if sep:
+            record = json.loads("{" + payload)
+            out.append(CycleViolation(**record))
+    return out
 
 
 class FrankaSimUnavailable(CablesimError, RuntimeError):
@@ -108,7 +208,15 @@ class FrankaSimServer:
     ``joint_discontinuity_scale``: franka-sim judges the joint-side discontinuity of Cartesian
     commands on its own differential IK of each commanded pose, which trips at the end of
     ordinary slow motions on this model, so that one check is loosened by default.
+    ``trace``: a file the server appends every state cycle to (``time message_id active
+    lost``), written when it stops; for ``benchmarks/franka_sim_timing.py``.
+    :meth:`cycle_violations` reads the cycle monitor's record of every motion-limit violation
+    (``_MONITOR``), which tells a reflex caused by this host's timing from one caused by the
+    motion (:attr:`CycleViolation.host_timing`).
     """
+
+    #: the server process's script (a format string; see ``_SCRIPT``)
+    script = _SCRIPT
 
     def __init__(
         self,
@@ -119,6 +227,7 @@ class FrankaSimServer:
         startup_timeout: float = 60.0,
         stop_timeout: float = 20.0,
         workdir: str | os.PathLike[str] | None = None,
+        trace: str | os.PathLike[str] | None = None,
     ) -> None:
         self.object_width = object_width
         self.enforce_motion_limits = bool(enforce_motion_limits)
@@ -127,6 +236,7 @@ class FrankaSimServer:
         self.startup_timeout = float(startup_timeout)
         self.stop_timeout = float(stop_timeout)
         self._workdir = None if workdir is None else Path(workdir)
+        self.trace = None if trace is None else Path(trace)
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
         self.proc: subprocess.Popen[bytes] | None = None
         self.log: Path | None = None
@@ -161,12 +271,15 @@ class FrankaSimServer:
         model.write_text(franka_sim_mjcf())
         script = work / "serve.py"
         script.write_text(
-            _SCRIPT.format(
+            self.script.format(
                 lifetime=self.lifetime,
                 host=HOST,
                 object_width=self.object_width,
                 enforce=self.enforce_motion_limits,
                 joint_discontinuity_scale=self.joint_discontinuity_scale,
+                monitor=_MONITOR.format(
+                    window=MONITOR_WINDOW, trace=str(self.trace) if self.trace else ""
+                ),
             )
         )
         self.log = work / "server.log"
@@ -198,6 +311,10 @@ class FrankaSimServer:
         if self.log is not None and self.log.exists():
             self._log_text = self.log.read_text(errors="replace")
         return self._log_text
+
+    def cycle_violations(self) -> list[CycleViolation]:
+        """Every motion-limit violation the server's cycle monitor logged so far."""
+        return parse_cycle_violations(self.log_text())
 
     def stop(self) -> None:
         """Interrupt the server (SIGINT, then SIGKILL after ``stop_timeout``)."""
