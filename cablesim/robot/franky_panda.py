@@ -34,13 +34,16 @@ server (see ``tests/robot/test_franky_panda.py`` and the README's "Real robot" s
 from __future__ import annotations
 
 import math
+import os
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
 
+from cablesim.errors import ConfigError
 from cablesim.panda.description import FLANGE_T_TCP, HAND_OFFSET, MAX_OPENING
 from cablesim.panda.ik import ArmModel, ArmModelChecks, Obstacle
 from cablesim.robot.base import Frame, MoveResult, Robot
@@ -61,6 +64,40 @@ def _import_franky() -> Any:
     return franky
 
 
+class _Scheduling:
+    """The calling thread's scheduling policy, kept apart from libfranka's control thread's.
+
+    libfranka raises the thread that constructs a ``franky.Robot`` to its realtime policy
+    (``SCHED_FIFO`` 99, also with ``RealtimeConfig.Ignore`` whenever the process may) and leaves
+    it there; franky's control thread, started by an asynchronous ``move``, inherits the policy
+    of the thread that starts it.  Left alone, the caller's own thread (IK checks, perception,
+    logging) would run at the control loop's priority and, on a shared core, hold it off.  So
+    the caller's policy is given back after connecting (:meth:`connected`) and lent again only
+    while a motion's control thread is being started (:meth:`starting_motion`).
+    """
+
+    def __init__(self) -> None:
+        self.caller = (os.sched_getscheduler(0), os.sched_getparam(0))
+        self.control = self.caller
+
+    def _set(self, policy: tuple[int, os.sched_param]) -> None:
+        if os.sched_getscheduler(0) != policy[0] or os.sched_getparam(0) != policy[1]:
+            os.sched_setscheduler(0, *policy)
+
+    def connected(self) -> None:
+        """Call right after ``franky.Robot(...)``: remember libfranka's policy, restore ours."""
+        self.control = (os.sched_getscheduler(0), os.sched_getparam(0))
+        self._set(self.caller)
+
+    @contextmanager
+    def starting_motion(self) -> Iterator[None]:
+        self._set(self.control)
+        try:
+            yield
+        finally:
+            self._set(self.caller)
+
+
 def _column_major(T: np.ndarray) -> list[float]:
     return [float(v) for v in np.asarray(T, dtype=float).T.reshape(16)]
 
@@ -76,6 +113,12 @@ class FrankyPanda(ArmModelChecks, Robot):
     only for a simulated robot.  ``collision_thresholds``: (torque Nm, force N) reflex
     thresholds, or None for franky's defaults.  ``robot``/``gripper``: already-connected franky
     objects (otherwise connected to ``host``); ``gripper=False`` runs without a hand.
+    ``rest_velocity`` (rad/s), ``rest_window`` and ``rest_timeout`` (s): a motion starts only
+    from rest, when no joint moved faster than ``rest_velocity`` on average over the last
+    ``rest_window``; an arm still moving after ``rest_timeout`` fails the motion (``MoveResult``
+    reason ``"arm not at rest: ..."``) without sending it.  The average over a window, not the
+    measured ``dq`` of one state, because a position-controlled arm holding still chatters:
+    franka-sim's arm reports up to 0.4 rad/s of sign-flipping ``dq`` at a standstill.
     """
 
     def __init__(
@@ -95,6 +138,9 @@ class FrankyPanda(ArmModelChecks, Robot):
         max_joint_jump: float = 0.25,
         motion_timeout: float = 30.0,
         settle_time: float = 0.5,
+        rest_velocity: float = 0.02,
+        rest_window: float = 0.05,
+        rest_timeout: float = 2.0,
         flange_T_tcp: np.ndarray = FLANGE_T_TCP,
         robot: Any = None,
         gripper: Any = None,
@@ -117,14 +163,26 @@ class FrankyPanda(ArmModelChecks, Robot):
         self.max_joint_jump = max_joint_jump
         self.motion_timeout = motion_timeout
         self.settle_time = settle_time
+        for name, value in (("rest_velocity", rest_velocity), ("rest_window", rest_window)):
+            if not value > 0:
+                raise ConfigError(name, f"must be > 0, got {value}")
+        if not rest_timeout >= rest_window:
+            raise ConfigError(
+                "rest_timeout", f"must be >= rest_window ({rest_window}), got {rest_timeout}"
+            )
+        self.rest_velocity = float(rest_velocity)
+        self.rest_window = float(rest_window)
+        self.rest_timeout = float(rest_timeout)
         self.flange_T_tcp = np.asarray(flange_T_tcp, dtype=float).reshape(4, 4)
 
         base = Pose.from_matrix(self.T_world_base)
         self.arm = ArmModel(base.position, base.quaternion, obstacles)
 
+        self._scheduling = _Scheduling()
         if robot is None:
             config = fr.RealtimeConfig.Enforce if realtime else fr.RealtimeConfig.Ignore
             robot = fr.Robot(host, realtime_config=config)
+            self._scheduling.connected()
         self.robot: franky.Robot = robot
         self.robot.relative_dynamics_factor = 1.0  # per-motion factors carry the scaling
         if collision_thresholds is not None:
@@ -271,14 +329,39 @@ class FrankyPanda(ArmModelChecks, Robot):
         motion = fr.JointMotion(q, fr.ReferenceType.Absolute, factor)
         return self._run(motion, None, q)
 
+    def wait_for_rest(self) -> str:
+        """Wait until the arm is at rest (see the class docstring); empty when it is, else the
+        reason, after ``rest_timeout``."""
+        deadline = time.monotonic() + self.rest_timeout
+        q0, t0 = self.joint_positions, time.monotonic()
+        while True:
+            time.sleep(self.rest_window)
+            q1, t1 = self.joint_positions, time.monotonic()
+            speed = float(np.max(np.abs(q1 - q0))) / max(t1 - t0, 1e-6)
+            if speed <= self.rest_velocity:
+                return ""
+            if t1 >= deadline:
+                return (
+                    f"arm not at rest: a joint moved at {speed:.3f} rad/s (rest_velocity "
+                    f"{self.rest_velocity} rad/s) {self.rest_timeout:.1f} s after the motion was asked"
+                )
+            q0, t0 = q1, t1
+
     def _run(
         self, motion: Any, target: Pose | None, q_target: np.ndarray | None = None
     ) -> MoveResult:
-        """Execute ``motion``; a reflex or a refused command becomes a failed MoveResult."""
+        """Execute ``motion`` from rest; a reflex or a refused command becomes a failed
+        MoveResult."""
         fr = self._franky
+        problem = self.wait_for_rest()
+        if problem:
+            return MoveResult(
+                False, problem, self._pos_error(target) if target is not None else float("nan")
+            )
         t0 = time.monotonic()
         try:
-            self.robot.move(motion, asynchronous=True)
+            with self._scheduling.starting_motion():
+                self.robot.move(motion, asynchronous=True)
             finished = self.robot.join_motion(self.motion_timeout)
         except (fr.ControlException, fr.CommandException, fr.InvalidOperationException) as exc:
             duration = time.monotonic() - t0
