@@ -15,20 +15,28 @@ from __future__ import annotations
 
 import gc
 import math
-import re
+import os
+import threading
+import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
+from host_timing import LIMIT, RetryingPanda, is_host_timing
 
 from cablesim.panda import HOME_QPOS, JOINT_LIMITS
 from cablesim.panda.ik import ArmModel
 from cablesim.panda.model import panda_spec
 from cablesim.robot.base import MoveResult
 from cablesim.robot.franky_panda import FLANGE_T_TCP, FrankyPanda, franka_sim_mjcf
-from cablesim.twin.franka_sim import HOST, FrankaSimServer, FrankaSimUnavailable
+from cablesim.twin.franka_sim import (
+    HOST,
+    CycleViolation,
+    FrankaSimServer,
+    FrankaSimUnavailable,
+    parse_cycle_violations,
+)
 
 OBJECT_WIDTH = 0.02  # m: the server's virtual object between the fingers
 SERVER_LIFETIME = 300.0  # s: the server exits on its own after this, whatever happens here
@@ -74,9 +82,9 @@ def test_flange_t_tcp_is_the_hand_tcp() -> None:
 
 # ---- the franka-sim server -------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def franka_sim_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+def franka_sim_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FrankaSimServer]:
     """A franka-sim server on 127.0.0.1:1337/1338 serving our Panda (every motion limit and
-    reflex enforced; see ``FrankaSimServer`` for the one loosened check); yields its log."""
+    reflex enforced; see ``FrankaSimServer`` for the one loosened check)."""
     pytest.importorskip("franky", reason="franky-control is not installed (the 'real' extra)")
     server = FrankaSimServer(
         object_width=OBJECT_WIDTH,
@@ -89,8 +97,7 @@ def franka_sim_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path
     except FrankaSimUnavailable as e:
         pytest.skip(str(e))
     try:
-        assert server.log is not None
-        yield server.log
+        yield server
     finally:
         server.stop()
 
@@ -111,7 +118,9 @@ T_WORLD_CAMERA = _yaw(0.0, (1.2, 0.0, 0.6)) @ np.array(
 
 
 @pytest.fixture(scope="module")
-def robot(franka_sim_server: Path) -> Iterator[FrankyPanda]:
+def robot(franka_sim_server: FrankaSimServer) -> Iterator[RetryingPanda]:
+    """The adapter, its motions retried (bounded, counted) when this host's missed control
+    cycles abort them (``host_timing.py``); ``robot.raw`` is the adapter itself."""
     panda = FrankyPanda(
         HOST,
         T_WORLD_CAMERA,
@@ -123,36 +132,19 @@ def robot(franka_sim_server: Path) -> Iterator[FrankyPanda]:
         joint_tolerance=0.02,
         motion_timeout=15.0,
     )
-    yield panda
+    yield RetryingPanda(panda, franka_sim_server)
     panda.close()
     gc.collect()
 
 
-def _host_missed_cycles(reason: str) -> bool:
-    """Whether a reflex came with libfranka reporting that this host missed >= 5 % of the
-    1 kHz command cycles (``control_command_success_rate`` below 0.95).  libfranka documents
-    that as the host's timing (no realtime kernel here, a shared CI machine), not the motion:
-    the server extrapolates the missed cycles and the late commands then jump."""
-    match = re.search(r"control_command_success_rate: ([0-9.]+)", reason)
-    return match is not None and float(match.group(1)) < 0.95 and reason.endswith("; recovered")
-
-
-def _home(robot: FrankyPanda, speed: float = 0.5) -> MoveResult:
-    """Home; once more if the first try was aborted only because this host missed cycles."""
-    result = robot.home(speed)
-    if not result and _host_missed_cycles(result.reason):
-        result = robot.home(speed)
-    return result
-
-
 @pytest.fixture
-def at_home(robot: FrankyPanda) -> FrankyPanda:
-    result = _home(robot)
+def at_home(robot: RetryingPanda) -> RetryingPanda:
+    result = robot.home(0.5)
     assert result, result.reason
     return robot
 
 
-def test_state_matches_our_kinematics(at_home: FrankyPanda) -> None:
+def test_state_matches_our_kinematics(at_home: RetryingPanda) -> None:
     robot = at_home
     q = robot.joint_positions
     assert q.shape == (7,)
@@ -168,7 +160,7 @@ def test_state_matches_our_kinematics(at_home: FrankyPanda) -> None:
     assert robot.gripper_opening == pytest.approx(0.08, abs=0.005)
 
 
-def test_cartesian_move_reaches_the_pose(at_home: FrankyPanda) -> None:
+def test_cartesian_move_reaches_the_pose(at_home: RetryingPanda) -> None:
     robot = at_home
     start = robot.ee_pose()
     target = start.translated([0.05, 0.03, -0.05])
@@ -178,7 +170,7 @@ def test_cartesian_move_reaches_the_pose(at_home: FrankyPanda) -> None:
     assert result.duration > 0.0
 
 
-def test_relative_moves_in_tcp_world_and_camera_frames(at_home: FrankyPanda) -> None:
+def test_relative_moves_in_tcp_world_and_camera_frames(at_home: RetryingPanda) -> None:
     robot = at_home
     for frame, delta in (
         ("tcp", np.array([0.0, 0.0, 0.04])),  # along the approach axis (down at home)
@@ -198,7 +190,7 @@ def test_relative_moves_in_tcp_world_and_camera_frames(at_home: FrankyPanda) -> 
         np.testing.assert_allclose(moved, expected, atol=0.01, err_msg=frame)
 
 
-def test_joint_move(at_home: FrankyPanda) -> None:
+def test_joint_move(at_home: RetryingPanda) -> None:
     robot = at_home
     q = HOME_QPOS + np.array([0.2, -0.1, 0.1, 0.15, 0.0, -0.1, 0.3])
     result = robot.move_joints(q, speed_factor=0.3)
@@ -206,7 +198,7 @@ def test_joint_move(at_home: FrankyPanda) -> None:
     np.testing.assert_allclose(robot.joint_positions, q, atol=0.02)
 
 
-def test_gripper_open_and_grasp(robot: FrankyPanda) -> None:
+def test_gripper_open_and_grasp(robot: RetryingPanda) -> None:
     assert robot.open(0.08)
     assert robot.gripper_opening == pytest.approx(0.08, abs=0.003)
     # The server holds a virtual 2 cm object between the fingers.
@@ -217,7 +209,7 @@ def test_gripper_open_and_grasp(robot: FrankyPanda) -> None:
     assert robot.open(0.08)
 
 
-def test_unreachable_target_is_refused_without_moving(at_home: FrankyPanda) -> None:
+def test_unreachable_target_is_refused_without_moving(at_home: RetryingPanda) -> None:
     robot = at_home
     q0 = robot.joint_positions
     far = robot.ee_pose().translated(robot.T_world_base[:3, 0] * 0.8)
@@ -231,7 +223,7 @@ def test_unreachable_target_is_refused_without_moving(at_home: FrankyPanda) -> N
     np.testing.assert_allclose(robot.joint_positions, q0, atol=0.03)
 
 
-def test_colliding_joint_target_is_refused(at_home: FrankyPanda) -> None:
+def test_colliding_joint_target_is_refused(at_home: RetryingPanda) -> None:
     robot = at_home
     q0 = robot.joint_positions
     folded = np.array([0.0, 1.5, 0.0, -3.0, 0.0, 1.5, 0.785])  # hand into the base
@@ -242,23 +234,93 @@ def test_colliding_joint_target_is_refused(at_home: FrankyPanda) -> None:
     np.testing.assert_allclose(robot.joint_positions, q0, atol=0.03)
 
 
-def test_reflex_is_reported_and_recovered(at_home: FrankyPanda) -> None:
+def test_reflex_is_reported_and_recovered(
+    at_home: RetryingPanda, franka_sim_server: FrankaSimServer
+) -> None:
     """Unchecked, an out-of-reach target makes the robot abort with a reflex; the adapter
-    recovers, and the robot moves again."""
+    recovers, and the robot moves again.  The provoked motion itself is never retried, and the
+    server's cycle monitor logged the reflex the client reports."""
     robot = at_home
+    seen = len(franka_sim_server.cycle_violations())
     far = robot.ee_pose().translated(robot.T_world_base[:3, 0] * 0.6)
-    result = robot.move_to(far, speed=0.2, check=False)
+    result = robot.raw.move_to(far, speed=0.2, check=False)
     assert not result
     assert "reflex" in result.reason and result.reason.endswith("; recovered"), result.reason
     assert not robot.robot.has_errors
-    home = _home(robot)
+    deadline = time.monotonic() + 2.0
+    while len(franka_sim_server.cycle_violations()) == seen and time.monotonic() < deadline:
+        time.sleep(0.05)
+    logged = franka_sim_server.cycle_violations()[seen:]
+    assert logged and any(v.violation in result.reason for v in logged), (result.reason, logged)
+    home = robot.home(0.5)
     assert home, home.reason
     start = robot.ee_pose()
     again = robot.move_to(start.translated([0.0, 0.0, 0.03]), speed=0.1)
     assert again, again.reason
 
 
-def test_ik_solution_is_consistent(at_home: FrankyPanda) -> None:
+def test_a_motion_starts_only_from_rest(
+    at_home: RetryingPanda, franka_sim_server: FrankaSimServer
+) -> None:
+    """While the arm still moves (a slow motion started behind the adapter's back), a motion
+    is refused with the named failure and nothing is sent; once it rests, motions run."""
+    robot, raw = at_home, at_home.raw
+    fr = raw._franky
+    q = np.asarray(HOME_QPOS) + np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    timeout, raw.rest_timeout = raw.rest_timeout, 0.3
+    try:
+        for _ in range(LIMIT + 1):
+            seen = len(franka_sim_server.cycle_violations())
+            slow = fr.JointMotion(
+                q, fr.ReferenceType.Absolute, fr.RelativeDynamicsFactor(0.1, 0.2, 0.2)
+            )
+            raw.robot.move(slow, asynchronous=True)
+            time.sleep(0.3)  # under way
+            refused = raw.move_joints(np.asarray(HOME_QPOS), speed_factor=0.3)
+            try:
+                raw.robot.join_motion(15.0)
+                break
+            except fr.ControlException as exc:  # the slow motion was aborted by a reflex
+                raw.recover()
+                aborted = MoveResult(False, f"reflex: {exc}; recovered")
+                assert is_host_timing(aborted, franka_sim_server.cycle_violations()[seen:]), exc
+                assert robot.home(0.5)
+    finally:
+        raw.rest_timeout = timeout
+    assert not refused and refused.reason.startswith("arm not at rest"), refused.reason
+    assert raw.wait_for_rest() == ""
+    # the refused motion (to HOME, 0.3 rad away in joint 1) never ran
+    np.testing.assert_allclose(raw.joint_positions[0], q[0], atol=0.05)
+    back = robot.home(0.5)
+    assert back, back.reason
+
+
+def test_the_calling_thread_keeps_its_scheduling(at_home: RetryingPanda) -> None:
+    """libfranka raises the thread that connects to its realtime policy; the adapter gives the
+    caller's policy back and lends libfranka's only to the control thread it starts."""
+    robot = at_home
+    caller = os.sched_getscheduler(0)
+    assert (caller, os.sched_getparam(0)) == robot.raw._scheduling.caller
+    control_policy = robot.raw._scheduling.control[0]
+    seen: dict[str, list[int]] = {}
+
+    def watch() -> None:
+        time.sleep(0.4)
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+        seen["policies"] = [os.sched_getscheduler(t) for t in tids if t != main]
+
+    main = threading.get_native_id()
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    q = np.asarray(HOME_QPOS) + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3])
+    result = robot.move_joints(q, speed_factor=0.2)
+    watcher.join()
+    assert result, result.reason
+    assert os.sched_getscheduler(0) == caller  # also during the motion: checked after it
+    assert control_policy in seen["policies"]  # the control thread has libfranka's policy
+
+
+def test_ik_solution_is_consistent(at_home: RetryingPanda) -> None:
     robot = at_home
     target = robot.ee_pose().translated([0.03, 0.0, -0.04])
     q = robot.solve_ik(target)
@@ -269,14 +331,46 @@ def test_ik_solution_is_consistent(at_home: FrankyPanda) -> None:
     assert ok, reason
 
 
-def test_host_timing_retry_is_narrow() -> None:
-    """The one retry above is for cycles this host missed, never for a motion that broke a
-    limit on its own or for a reflex the adapter could not recover from."""
-    timing = (
+def _violation(name: str, lost: int = 0, span_ms: float = 3.0) -> CycleViolation:
+    return CycleViolation(name, True, lost, span_ms, 3, 0.0)
+
+
+def test_host_timing_is_a_discontinuity_after_lost_cycles_or_a_stall() -> None:
+    """The rule the retry rests on (``CycleViolation.host_timing``)."""
+    jump = "joint_motion_generator_velocity_discontinuity"
+    assert _violation(jump, lost=1).host_timing
+    assert _violation(jump, lost=0, span_ms=12.0).host_timing  # the server stalled
+    assert not _violation(jump, lost=0, span_ms=3.0).host_timing  # in time: the motion's own
+    assert not _violation("joint_position_limits_violation", lost=2).host_timing
+    assert not _violation("cartesian_reflex", lost=2).host_timing
+
+
+def test_retry_only_for_a_recovered_reflex_that_is_all_host_timing() -> None:
+    reflex = (
         "robot aborted the motion: ControlException: libfranka: Move command aborted: motion "
-        'aborted by reflex! ["joint_velocity_violation"]\\ncontrol_command_success_rate: 0.85'
+        'aborted by reflex! ["joint_motion_generator_velocity_discontinuity"]\n'
+        "control_command_success_rate: 0.96"
     )
-    assert _host_missed_cycles(timing + "; recovered")
-    assert not _host_missed_cycles(timing.replace("0.85", "0.99") + "; recovered")
-    assert not _host_missed_cycles(timing + "; recovery FAILED")
-    assert not _host_missed_cycles("joint target not reached (error 0.100 rad)")
+    timing = [_violation("joint_motion_generator_velocity_discontinuity", lost=1)]
+    genuine = [_violation("joint_motion_generator_velocity_discontinuity", lost=0)]
+    assert is_host_timing(MoveResult(False, reflex + "; recovered"), timing)
+    assert not is_host_timing(MoveResult(False, reflex + "; recovery FAILED"), timing)
+    assert not is_host_timing(MoveResult(False, reflex + "; recovered"), genuine)
+    assert not is_host_timing(MoveResult(False, reflex + "; recovered"), timing + genuine)
+    assert not is_host_timing(MoveResult(False, reflex + "; recovered"), [])  # no evidence
+    assert not is_host_timing(MoveResult(False, "joint target not reached (error 0.1 rad)"), timing)
+    assert not is_host_timing(MoveResult(True, ""), timing)
+
+
+def test_cycle_monitor_records_parse() -> None:
+    log = (
+        "2026-12-01 20:30:22,661 WARNING franka_sim.motion_limits: motion limit violated\n"
+        '2026-12-01 20:30:22,661 INFO cablesim.cycles: cablesim-cycles: {"violation": '
+        '"cartesian_motion_generator_velocity_discontinuity", "enforced": true, '
+        '"lost_cycles": 2, "span_ms": 4.5, "cycles": 3, "time": 12.5}\n'
+    )
+    (v,) = parse_cycle_violations(log)
+    assert v == CycleViolation(
+        "cartesian_motion_generator_velocity_discontinuity", True, 2, 4.5, 3, 12.5
+    )
+    assert v.host_timing
