@@ -131,6 +131,7 @@ def robot(franka_sim_server: FrankaSimServer) -> Iterator[RetryingPanda]:
         rotation_tolerance=0.05,
         joint_tolerance=0.02,
         motion_timeout=15.0,
+        settle_time=2.0,  # the simulated arm runs slower than real time on a loaded host
     )
     yield RetryingPanda(panda, franka_sim_server)
     panda.close()
@@ -277,20 +278,27 @@ def test_a_motion_starts_only_from_rest(
             raw.robot.move(slow, asynchronous=True)
             time.sleep(0.3)  # under way
             refused = raw.move_joints(np.asarray(HOME_QPOS), speed_factor=0.3)
+            q_refused = raw.joint_positions
             try:
-                raw.robot.join_motion(15.0)
-                break
-            except fr.ControlException as exc:  # the slow motion was aborted by a reflex
+                if "reflex" not in refused.reason:
+                    raw.robot.join_motion(15.0)
+            except fr.ControlException:  # aborted after the refusal: what it showed stands
                 raw.recover()
-                aborted = MoveResult(False, f"reflex: {exc}; recovered")
-                assert is_host_timing(aborted, franka_sim_server.cycle_violations()[seen:]), exc
-                assert robot.home(0.5)
+            if "reflex" not in refused.reason:
+                break
+            # the slow motion was aborted by a reflex before the refusal: it has to be the
+            # host's timing, and the test starts over
+            raw.recover()
+            violations = franka_sim_server.cycle_violations()[seen:]
+            assert is_host_timing(refused, violations), (refused.reason, violations)
+            assert robot.home(0.5)
     finally:
         raw.rest_timeout = timeout
     assert not refused and refused.reason.startswith("arm not at rest"), refused.reason
     assert raw.wait_for_rest() == ""
-    # the refused motion (to HOME, 0.3 rad away in joint 1) never ran
-    np.testing.assert_allclose(raw.joint_positions[0], q[0], atol=0.05)
+    # the refused motion (to HOME, 0.3 rad back in joint 1) never ran: joint 1 went on or
+    # stopped, it never turned back
+    assert raw.joint_positions[0] >= q_refused[0] - 0.01, (raw.joint_positions, q_refused)
     back = robot.home(0.5)
     assert back, back.reason
 
@@ -302,22 +310,31 @@ def test_the_calling_thread_keeps_its_scheduling(at_home: RetryingPanda) -> None
     caller = os.sched_getscheduler(0)
     assert (caller, os.sched_getparam(0)) == robot.raw._scheduling.caller
     control_policy = robot.raw._scheduling.control[0]
-    seen: dict[str, list[int]] = {}
-
-    def watch() -> None:
-        time.sleep(0.4)
-        tids = [int(t) for t in os.listdir("/proc/self/task")]
-        seen["policies"] = [os.sched_getscheduler(t) for t in tids if t != main]
-
     main = threading.get_native_id()
+    seen: dict[str, set[int]] = {"main": set(), "others": set()}
+    moving = threading.Event()
+
+    def watch() -> None:  # the policies of this process's threads while the motion runs
+        while not moving.is_set():
+            time.sleep(0.02)
+            for tid in (int(t) for t in os.listdir("/proc/self/task")):
+                try:
+                    policy = os.sched_getscheduler(tid)
+                except OSError:  # the thread ended meanwhile
+                    continue
+                seen["main" if tid == main else "others"].add(policy)
+
     watcher = threading.Thread(target=watch)
     watcher.start()
-    q = np.asarray(HOME_QPOS) + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3])
-    result = robot.move_joints(q, speed_factor=0.2)
-    watcher.join()
+    try:
+        q = np.asarray(HOME_QPOS) + np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3])
+        result = robot.move_joints(q, speed_factor=0.2)
+    finally:
+        moving.set()
+        watcher.join()
     assert result, result.reason
-    assert os.sched_getscheduler(0) == caller  # also during the motion: checked after it
-    assert control_policy in seen["policies"]  # the control thread has libfranka's policy
+    assert seen["main"] == {caller}  # the calling thread kept its policy throughout
+    assert control_policy in seen["others"]  # the control thread ran with libfranka's
 
 
 def test_ik_solution_is_consistent(at_home: RetryingPanda) -> None:
