@@ -37,7 +37,10 @@ case "$extras" in
   *) spec=".[$extras]" ;;
 esac
 echo "[setup] installing cablesim $spec"
-.venv/bin/python -m pip install -q -e "$spec" 2>&1 | grep -v '^WARNING: Location' || true
+# setuptools notes every editable install ("Editable installation. Please be careful with
+# folders ... with the same name as your package"): advice, not a problem of this project
+PYTHONWARNINGS="ignore:Editable installation" \
+  .venv/bin/python -m pip install -q -e "$spec" 2>&1 | grep -v '^WARNING: Location' || true
 if [ "$extras" = "dev" ] && [ ! -x .cache/franka-sim-venv/bin/python ]; then
   # the franka-sim test server for the real-robot adapter needs mujoco 3.2 and numpy 1.26:
   # it gets an environment of its own (tests/robot/test_franky_panda.py looks for it here)

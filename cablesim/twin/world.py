@@ -20,18 +20,13 @@ frame is the twin Panda's base (``T_world_base``) and the camera's pose is the t
 Time.  While following, the twin's own clock (the *twin time*, on ``time.monotonic()``'s time
 base: the wall time the world's current state stands for) advances with the simulated time and
 tracks the wall clock as closely as the CPU allows.  Two sampler threads record the robot's
-measurements with their wall times: the joints (every ``joint_period`` s) and the gripper (a
-franky gripper read blocks until the hand's next state packet: 60 Hz on franka-sim).  Every
-physics step replays them at its twin time: the Panda's arm position actuators get the joint
-positions interpolated at that time (extrapolated with the measured velocities for at most
-``extrapolate`` s past the newest sample), plus ``SimPanda``'s velocity feed-forward; the
-gripper actuator gets the opening measured then -- or 0, closing with its force limit on the
-hose, while the robot reports a grasp at an opening no wider than the hose (franka-sim's gripper
-stops at a virtual object; here the fingers must really squeeze the 15 mm hose for the friction
-grasp to hold).  The gripper command moves at the hand's speed (``gripper_speed``: closing,
-opening; franky's defaults), since franka-sim's kinematic hand jumps.  So the twin re-enacts the robot's motion faithfully even when a loaded machine
-makes it fall behind the wall clock (the *lag*); it catches up as fast as its physics runs.
-Only beyond ``max_lag`` it skips ahead (counted; the arm then jumps).
+measurements with their wall times (:mod:`cablesim.twin.sampling`: the joints every
+``joint_period`` s, the gripper); every physics step replays them at its twin time on the
+Panda's actuators (:mod:`cablesim.twin.replay`: interpolated joints, extrapolated for at most
+``extrapolate`` s, the gripper at the hand's ``gripper_speed``, squeezing the hose while the
+robot reports a grasp).  So the twin re-enacts the robot's motion faithfully even when a loaded
+machine makes it fall behind the wall clock (the *lag*); it catches up as fast as its physics
+runs.  Only beyond ``max_lag`` it skips ahead (counted; the arm then jumps).
 
 Frames.  RGB-D and labels are rendered every ``1 / fps`` s of twin time, at the physics step
 of that time, stamped with their twin time (seconds since following started: the camera
@@ -56,239 +51,47 @@ rest of the process (the robot's control loop).
 
 from __future__ import annotations
 
-import bisect
-import collections
 import concurrent.futures
 import math
 import os
 import queue
 import threading
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Any, Protocol, TypeVar
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 import mujoco
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.panda.description import MAX_OPENING
 from cablesim.panda.ik import ArmModel, Obstacle, static_obstacles
 from cablesim.panda.model import joint_qpos_addresses, robot_body_ids
 from cablesim.perception.frames import Intrinsics
-from cablesim.sim.camera import SimCamera, SimSnapshot, intrinsics_from_fovy
-from cablesim.sim.session import EpisodeConfig
+from cablesim.robot.pose import Pose
+from cablesim.seeding import stream
+from cablesim.sim.camera import SimCamera, intrinsics_from_fovy
+from cablesim.sim.session import EpisodeConfig, choose_start
 from cablesim.sim.world import World
+from cablesim.twin.replay import KV_OVER_KP, Replay
+from cablesim.twin.sampling import Samplers
+from cablesim.twin.sources import FrankySource, ReplaySource, RobotSource
+from cablesim.twin.state import FrameHistory, StateBoard, TwinFrame, TwinState, TwinStats
+
+__all__ = [
+    "KV_OVER_KP",
+    "FrankySource",
+    "ReplaySource",
+    "RobotSource",
+    "TwinFrame",
+    "TwinState",
+    "TwinStats",
+    "TwinWorld",
+]
 
 T = TypeVar("T")
 
-#: Velocity feed-forward through the position target: kv / kp of the arm actuators (SimPanda's).
-KV_OVER_KP = 0.1
 #: Measurements kept behind the twin time (s).
 _KEEP = 2.0
-
-
-class RobotSource(Protocol):
-    """Where the twin reads the robot's measured state."""
-
-    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Measured arm joint positions (7,) and velocities (7,)."""
-
-    def gripper_state(self) -> tuple[float, bool]:
-        """Measured finger opening (m) and whether the hand reports a grasp."""
-
-
-class FrankySource:
-    """The measured state of a :class:`~cablesim.robot.franky_panda.FrankyPanda` (franky)."""
-
-    def __init__(self, robot: Any) -> None:
-        self.robot = robot
-
-    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
-        s = self.robot.robot.current_joint_state
-        return (
-            np.asarray(s.position, dtype=float).reshape(7),
-            np.asarray(s.velocity, dtype=float).reshape(7),
-        )
-
-    def gripper_state(self) -> tuple[float, bool]:
-        gripper = self.robot.gripper
-        if gripper is None:
-            return math.nan, False
-        s = gripper.state
-        return float(s.width), bool(s.is_grasped)
-
-
-class ReplaySource:
-    """A :class:`RobotSource` that replays timed way points, e.g. a logged robot session:
-    ``joints`` as (t, q) pairs, piecewise linear between them; ``gripper`` as
-    (t, opening, grasped) steps.  Times are seconds since :meth:`start` (or the first read)."""
-
-    def __init__(
-        self,
-        joints: Sequence[tuple[float, Sequence[float]]],
-        gripper: Sequence[tuple[float, float, bool]] = ((0.0, MAX_OPENING, False),),
-    ) -> None:
-        if not joints or not gripper:
-            raise InputError("a replay needs at least one joint and one gripper way point")
-        self.times = np.asarray([float(t) for t, _ in joints])
-        self.q = np.asarray([np.asarray(q, float).reshape(7) for _, q in joints])
-        if np.any(np.diff(self.times) <= 0):
-            raise InputError("joint way points must be in increasing time order")
-        self.gripper = sorted((float(t), float(w), bool(g)) for t, w, g in gripper)
-        self.t0: float | None = None
-
-    def start(self, t0: float | None = None) -> None:
-        self.t0 = time.monotonic() if t0 is None else float(t0)
-
-    def _t(self) -> float:
-        if self.t0 is None:
-            self.start()
-        assert self.t0 is not None
-        return time.monotonic() - self.t0
-
-    def joint_state(self) -> tuple[np.ndarray, np.ndarray]:
-        t = self._t()
-        i = int(np.searchsorted(self.times, t, side="right"))
-        if i == 0:
-            return self.q[0].copy(), np.zeros(7)
-        if i >= len(self.times):
-            return self.q[-1].copy(), np.zeros(7)
-        t0, t1 = self.times[i - 1], self.times[i]
-        rate = (self.q[i] - self.q[i - 1]) / (t1 - t0)
-        return self.q[i - 1] + rate * (t - t0), rate
-
-    def gripper_state(self) -> tuple[float, bool]:
-        t = self._t()
-        _, width, grasped = self.gripper[0]
-        for tg, w, g in self.gripper:
-            if tg <= t:
-                width, grasped = w, g
-        return width, grasped
-
-
-class _Track:
-    """Time-stamped measurements (appended by a sampler, read by the twin thread)."""
-
-    def __init__(self) -> None:
-        self.times: list[float] = []
-        self.values: list[Any] = []
-        self.lock = threading.Lock()
-
-    def add(self, t: float, value: Any) -> None:
-        with self.lock:
-            self.times.append(t)
-            self.values.append(value)
-
-    def newest_time(self) -> float:
-        with self.lock:
-            return self.times[-1] if self.times else -math.inf
-
-    def around(self, t: float) -> tuple[tuple[float, Any] | None, tuple[float, Any] | None]:
-        """The newest sample at or before ``t`` and the first one after it."""
-        with self.lock:
-            i = bisect.bisect_right(self.times, t)
-            before = (self.times[i - 1], self.values[i - 1]) if i > 0 else None
-            after = (self.times[i], self.values[i]) if i < len(self.times) else None
-            return before, after
-
-    def forget_before(self, t: float) -> None:
-        """Drop samples older than ``t`` (keeping the newest one at or before it)."""
-        with self.lock:
-            i = bisect.bisect_right(self.times, t) - 1
-            if i > 0:
-                del self.times[:i]
-                del self.values[:i]
-
-
-@dataclass(frozen=True)
-class TwinState:
-    """A published copy of the twin's state (read by other threads)."""
-
-    wall: float  # time.monotonic() when published
-    twin_time: float  # the wall time the world's state stands for (monotonic time base)
-    sim_time: float  # the world's simulated time
-    following: bool
-    q: np.ndarray  # twin arm joints (7,)
-    q_target: np.ndarray  # the measured joints replayed at twin_time (7,)
-    joints_measured_at: float  # wall time of the newest joint sample replayed
-    gripper_measured: tuple[float, bool]  # opening (m) and grasp flag in effect at twin_time
-    gripper_measured_at: float  # wall time of that gripper sample
-    gripper_ctrl: float  # the twin gripper's command (m; 0 = closing with force)
-    tcp: np.ndarray  # twin grasp-site position (world)
-    tcp_rotation: np.ndarray  # 3x3
-    opening: float  # twin finger opening (m)
-    fingers_settled: bool  # the fingers have rested since their command last changed
-    hose_vertices: tuple[np.ndarray, ...]
-
-    @property
-    def joint_error(self) -> float:
-        """Largest difference (rad) between the twin's arm and the replayed measurement."""
-        return float(np.max(np.abs(self.q - self.q_target)))
-
-    @property
-    def lag(self) -> float:
-        """How far (s) the twin was behind the wall clock when this was published."""
-        return self.wall - self.twin_time
-
-
-@dataclass
-class TwinFrame:
-    """One rendered frame of the twin."""
-
-    number: int
-    stamp: float  # s of twin time since following started: the camera device's timestamp
-    twin_time: float  # the wall time the frame shows (monotonic time base)
-    wall: float  # time.monotonic() when rendered
-    snapshot: SimSnapshot
-    state: TwinState
-
-    @property
-    def rgb(self) -> np.ndarray:
-        return self.snapshot.image.rgb
-
-    @property
-    def depth(self) -> np.ndarray:
-        return self.snapshot.image.depth
-
-
-@dataclass
-class TwinStats:
-    """What the twin measured about itself while following."""
-
-    steps: int = 0
-    frames: int = 0
-    followed_s: float = 0.0  # wall time spent following
-    skipped_s: float = 0.0  # twin time skipped because the twin fell too far behind
-    skips: int = 0
-    dropped: int = 0  # frames not rendered to let the physics catch up
-    render_s: float = 0.0
-    physics_s: float = 0.0
-    lag_ms: list[float] = field(default_factory=list)  # per frame: wall - twin time
-    tracking_mm: list[float] = field(default_factory=list)  # per frame: TCP, twin vs replayed
-    timestep: float = 0.004  # s per physics step
-
-    def summary(self) -> dict[str, float]:
-        def q(x: list[float], p: float) -> float:
-            return float(np.percentile(x, p)) if x else math.nan
-
-        return {
-            "steps": self.steps,
-            "frames": self.frames,
-            "followed_s": round(self.followed_s, 3),
-            "frame_rate_hz": round(self.frames / self.followed_s, 2) if self.followed_s else 0.0,
-            "dropped_frames": self.dropped,
-            "skipped_s": round(self.skipped_s, 3),
-            "skips": self.skips,
-            "render_ms_per_frame": round(1000 * self.render_s / max(self.frames, 1), 2),
-            "physics_realtime_factor": round(
-                self.steps * self.timestep / self.physics_s if self.physics_s else 0.0, 2
-            ),
-            "lag_ms_median": q(self.lag_ms, 50),
-            "lag_ms_max": max(self.lag_ms) if self.lag_ms else math.nan,
-            "tracking_mm_median": q(self.tracking_mm, 50),
-            "tracking_mm_p95": q(self.tracking_mm, 95),
-        }
 
 
 class TwinWorld:
@@ -321,13 +124,7 @@ class TwinWorld:
         self.max_lag = float(max_lag)
         self.frame_lag = float(frame_lag)
         self.max_frame_gap = float(max_frame_gap)
-        self.joint_period = float(joint_period)
-        self.extrapolate = float(extrapolate)
-        self.history = float(history)
         self.nice = int(nice)
-        self.settle_time = float(settle_time)
-        self.finger_rest_speed = float(finger_rest_speed)
-        self.gripper_speed = (float(gripper_speed[0]), float(gripper_speed[1]))
         if world is None:
             world = World.build(self.cfg.scene_config())
         world.reset()
@@ -340,9 +137,6 @@ class TwinWorld:
         n = world.panda
         self._qadr = joint_qpos_addresses(m, n.joints)
         self._finger_qadr = joint_qpos_addresses(m, n.finger_joints)
-        self._finger_dofadr = np.asarray([m.jnt_dofadr[m.joint(j).id] for j in n.finger_joints])
-        self._act = np.asarray([m.actuator(a).id for a in n.actuators])
-        self._gripper_act = m.actuator(n.gripper_actuator).id
         self._site = m.site(n.site).id
         self._dt = float(m.opt.timestep)
         mujoco.mj_forward(m, d)
@@ -356,15 +150,13 @@ class TwinWorld:
         self.intrinsics: Intrinsics = intrinsics_from_fovy(
             self.width, self.height, float(m.cam_fovy[world.camera_id])
         )
-        self.hose_diameter = 2.0 * float(world.cfg.hoses.radius)
         self.outputs: list[Callable[[TwinFrame], None]] = []
         self.stats = TwinStats(timestep=self._dt)
         self.camera: SimCamera | None = None  # created on the twin thread
         self.source: RobotSource | None = None
         self.error: BaseException | None = None
 
-        self._lock = threading.Lock()
-        self._published = threading.Condition(self._lock)
+        self._lock = threading.Lock()  # guards the follow request
         self._calls: queue.Queue[tuple[Callable[[TwinWorld], Any], concurrent.futures.Future]] = (
             queue.Queue()
         )
@@ -372,25 +164,27 @@ class TwinWorld:
         self._stop = threading.Event()
         self._follow_request: bool | None = None
         self._following = False
-        self._joints = _Track()
-        self._grip = _Track()
-        self._frames: collections.deque[TwinFrame] = collections.deque()
+        self._samplers = Samplers(joint_period, self._stop, self._fail)
+        self._replay = Replay(
+            world,
+            self._samplers.joints,
+            self._samplers.gripper,
+            extrapolate=extrapolate,
+            hose_diameter=2.0 * float(world.cfg.hoses.radius),
+            gripper_speed=gripper_speed,
+            settle_time=settle_time,
+            finger_rest_speed=finger_rest_speed,
+            q=self.q,
+            opening=self.opening,
+        )
+        self._frames = FrameHistory(history)
         self._frame_number = 0
         self._t0 = 0.0  # wall time following started (the frame clock's zero)
         self._wall0 = self._sim0 = 0.0  # twin time = _wall0 + (sim time - _sim0)
         self._next_frame = 0.0
         self._last_render = -math.inf
         self._follow_started = 0.0
-        self._q_target = self.q
-        self._joint_at = -math.inf
-        self._gripper_in_effect: tuple[float, bool, float] = (self.opening, False, -math.inf)
-        self._gripper_ctrl = float(d.ctrl[self._gripper_act])  # the goal (m)
-        self._gripper_cmd = self._gripper_ctrl  # the actuator command, ramped to the goal
-        self._finger_still_since: float | None = None
-        self._fingers_settled = True
-        self._state = self._make_state()
-        self._samplers: list[threading.Thread] = []
-        self._sampler_stop = threading.Event()
+        self._board = StateBoard(self._make_state())
         self._thread = threading.Thread(target=self._run, name="cablesim-twin", daemon=True)
         self._ready = threading.Event()
         self._thread.start()
@@ -398,12 +192,42 @@ class TwinWorld:
             self.close()
             raise RuntimeError(f"the twin thread did not start: {self.error!r}")
 
+    # ------------------------------------------------------------------ options
+    @property
+    def joint_period(self) -> float:
+        """Seconds between joint samples."""
+        return self._samplers.joint_period
+
+    @property
+    def extrapolate(self) -> float:
+        """Seconds the joints are extrapolated past the newest sample, at most."""
+        return self._replay.extrapolate
+
+    @property
+    def history(self) -> float:
+        """Seconds of wall time rendered frames are kept for :meth:`frame_at`."""
+        return self._frames.seconds
+
+    @property
+    def settle_time(self) -> float:
+        return self._replay.settle_time
+
+    @property
+    def finger_rest_speed(self) -> float:
+        return self._replay.finger_rest_speed
+
+    @property
+    def gripper_speed(self) -> tuple[float, float]:
+        return self._replay.gripper_speed
+
+    @property
+    def hose_diameter(self) -> float:
+        return self._replay.hose_diameter
+
     # ------------------------------------------------------------------ frames and poses
     @property
     def T_world_base(self) -> np.ndarray:
         """The robot base in the world (4x4): give it to the robot adapter."""
-        from cablesim.robot.pose import Pose
-
         pos, quat = self.world.panda_base  # type: ignore[misc]
         return Pose(pos, quat).matrix()
 
@@ -448,9 +272,6 @@ class TwinWorld:
         still shows the settled scene.  ``robot`` judges reachability.  The twin does not
         re-draw its scene: a draw with no qualifying hose raises ``NoGraspableSegmentError``
         (give the draw that pure simulation used: ``SceneConfig.draw``)."""
-        from cablesim.seeding import stream
-        from cablesim.sim.session import choose_start
-
         draw = self.cfg.scene.draw
         rng = stream(self.cfg.seed, "episode", *((draw,) if draw else ()))
         cfg = self.cfg if interaction is None else self.cfg.replace(interaction=interaction)
@@ -473,17 +294,18 @@ class TwinWorld:
             raise InputError("attach a robot source first (twin.attach)")
         self.check()
         q, _ = self.source.joint_state()
-        err = float(np.max(np.abs(np.asarray(q) - self._state.q)))
+        err = float(np.max(np.abs(np.asarray(q) - self._board.latest().q)))
         if err > max_joint_error:
             raise InputError(
                 f"the robot's joints are {err:.3f} rad from the twin's arm (tolerance "
                 f"{max_joint_error}); move the robot to the twin's configuration first"
             )
         start = time.monotonic()
-        self._start_samplers()
+        self._samplers.start(self.source)
         deadline = start + timeout
         while (
-            self._joints.newest_time() < start or self._grip.newest_time() < start
+            self._samplers.joints.newest_time() < start
+            or self._samplers.gripper.newest_time() < start
         ) and time.monotonic() < deadline:
             self.check()
             time.sleep(0.002)
@@ -502,7 +324,7 @@ class TwinWorld:
         self._wake.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self.wait_state(lambda s: not s.following, timeout)
-        self._stop_samplers()
+        self._samplers.stop()
 
     def close(self, timeout: float = 10.0) -> None:
         """Stop following, close the renderer on the twin thread and end the threads."""
@@ -510,7 +332,7 @@ class TwinWorld:
         self._wake.set()
         if threading.current_thread() is not self._thread:
             self._thread.join(timeout)
-        self._stop_samplers()
+        self._samplers.stop()
 
     def __enter__(self) -> TwinWorld:
         return self
@@ -523,22 +345,24 @@ class TwinWorld:
         if self.error is not None:
             raise RuntimeError(f"the digital twin stopped: {self.error!r}") from self.error
 
+    def _fail(self, error: BaseException) -> None:
+        """A sampler thread's error: keep it and stop the twin."""
+        self.error = error
+        self._stop.set()
+        self._wake.set()
+
     # ------------------------------------------------------------------ reading
     def state(self) -> TwinState:
-        with self._lock:
-            return self._state
+        return self._board.latest()
 
     def wait_state(self, predicate: Callable[[TwinState], bool], timeout: float) -> TwinState:
         """The first published state (the current one, or a later one) for which
         ``predicate`` holds, or the latest after ``timeout`` s."""
-        deadline = time.monotonic() + timeout
-        with self._published:
-            while not predicate(self._state):
-                left = deadline - time.monotonic()
-                if left <= 0 or self.error is not None or not self._thread.is_alive():
-                    break
-                self._published.wait(min(left, 0.1))
-            return self._state
+        return self._board.wait(
+            predicate,
+            timeout,
+            give_up=lambda: self.error is not None or not self._thread.is_alive(),
+        )
 
     def synced(
         self, timeout: float = 2.0, joint_tolerance: float = 0.003
@@ -562,11 +386,7 @@ class TwinWorld:
 
     def frame_at(self, stamp: float, tolerance: float = 5e-4) -> TwinFrame | None:
         """The rendered frame with timestamp ``stamp`` (s on the frame clock), if still kept."""
-        with self._lock:
-            for f in reversed(self._frames):
-                if abs(f.stamp - stamp) <= tolerance:
-                    return f
-            return None
+        return self._frames.at(stamp, tolerance)
 
     def frame_time(self, image: Any) -> float:
         """When a frame the twin rendered was taken, on ``time.monotonic()``'s time base (the
@@ -575,8 +395,7 @@ class TwinWorld:
         return self._t0 + float(image.timestamp)
 
     def latest_frame(self) -> TwinFrame | None:
-        with self._lock:
-            return self._frames[-1] if self._frames else None
+        return self._frames.latest()
 
     # ------------------------------------------------------------------ the twin thread
     def _camera(self, tessellation: tuple[int, int]) -> SimCamera:
@@ -611,9 +430,7 @@ class TwinWorld:
                 self.stats.followed_s += time.monotonic() - self._follow_started
             self._following = False
             self._ready.set()
-            with self._published:
-                self._state = self._make_state()
-                self._published.notify_all()
+            self._publish()
             if self.camera is not None:
                 self.camera.close()
             while True:
@@ -656,40 +473,9 @@ class TwinWorld:
     def _twin_time(self) -> float:
         return self._wall0 + (self.world.time - self._sim0)
 
-    def _joint_target(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Measured joints and velocities at wall time ``t`` (interpolated; extrapolated a
-        little past the newest sample)."""
-        before, after = self._joints.around(t)
-        if before is None:
-            if after is None:
-                return self._q_target, np.zeros(7)
-            (_, (q, dq)) = after
-            self._joint_at = -math.inf
-            return q, np.zeros(7)
-        t0, (q0, dq0) = before
-        self._joint_at = t0
-        if after is None:
-            return q0 + dq0 * min(t - t0, self.extrapolate), dq0
-        t1, (q1, dq1) = after
-        s = (t - t0) / max(t1 - t0, 1e-9)
-        return q0 + s * (q1 - q0), dq0 + s * (dq1 - dq0)
-
-    def _gripper_target(self, t: float) -> float:
-        before, _ = self._grip.around(t)
-        if before is not None:
-            t_g, (width, grasped) = before
-            self._gripper_in_effect = (width, grasped, t_g)
-        width, grasped, _ = self._gripper_in_effect
-        if grasped and width <= self.hose_diameter + 1e-3:
-            return 0.0  # the robot holds something: squeeze what is between the fingers
-        if math.isfinite(width):
-            return float(np.clip(width, 0.0, MAX_OPENING))
-        return self._gripper_ctrl
-
     def _advance(self) -> None:
         """Step the physics towards the wall clock, replaying the measurements; render the
         frames that fall due on the way."""
-        w, d = self.world, self.world.data
         now = time.monotonic()
         if now - self._twin_time > self.max_lag:  # hopelessly behind: skip ahead
             skip = now - self._twin_time - self._dt
@@ -701,23 +487,10 @@ class TwinWorld:
         budget = t0 + 0.02  # s per pass: then publish, serve calls, look at the clock again
         period = 1.0 / self.fps
         while self._twin_time + 0.5 * self._dt <= now:
-            t = self._twin_time + self._dt
-            q, dq = self._joint_target(t)
-            self._q_target = q
-            d.ctrl[self._act] = q + KV_OVER_KP * dq
-            goal = self._gripper_target(t)
-            if goal != self._gripper_ctrl:
-                self._gripper_ctrl, self._finger_still_since = goal, None
-                self._fingers_settled = False
-            # the hand moves its fingers at its own speed (a command jumping to 0 would slam
-            # them through the thin hose)
-            speed = self.gripper_speed[0] if goal < self._gripper_cmd else self.gripper_speed[1]
-            step = speed * self._dt
-            self._gripper_cmd += float(np.clip(goal - self._gripper_cmd, -step, step))
-            d.ctrl[self._gripper_act] = self._gripper_cmd
-            w.step(1)
+            self._replay.command(self._twin_time + self._dt)
+            self.world.step(1)
             self.stats.steps += 1
-            self._watch_fingers()
+            self._replay.watch_fingers()
             if self._twin_time + 0.5 * self._dt >= self._next_frame:
                 wall = time.monotonic()
                 lag = wall - self._twin_time
@@ -731,50 +504,37 @@ class TwinWorld:
             if time.perf_counter() > budget:
                 break
         self.stats.physics_s += time.perf_counter() - t0
-        self._joints.forget_before(self._twin_time - _KEEP)
-        self._grip.forget_before(self._twin_time - _KEEP)
+        self._samplers.joints.forget_before(self._twin_time - _KEEP)
+        self._samplers.gripper.forget_before(self._twin_time - _KEEP)
         self._publish()
         wait = self._twin_time + self._dt - time.monotonic()
         if wait > 0:
             self._wake.wait(wait)
             self._wake.clear()
 
-    def _watch_fingers(self) -> None:
-        speed = float(np.max(np.abs(self.world.data.qvel[self._finger_dofadr])))
-        t = self.world.time
-        if speed > self.finger_rest_speed or self._gripper_cmd != self._gripper_ctrl:
-            self._finger_still_since = None
-        elif self._finger_still_since is None:
-            self._finger_still_since = t
-        elif t - self._finger_still_since >= self.settle_time:
-            self._fingers_settled = True
-
     def _make_state(self) -> TwinState:
-        d = self.world.data
-        width, grasped, t_grip = self._gripper_in_effect
+        d, r = self.world.data, self._replay
+        width, grasped, t_grip = r.gripper_in_effect
         return TwinState(
             wall=time.monotonic(),
             twin_time=self._twin_time if self._following else time.monotonic(),
             sim_time=float(d.time),
             following=self._following,
             q=self.q,
-            q_target=np.asarray(self._q_target, float).copy(),
-            joints_measured_at=self._joint_at,
+            q_target=np.asarray(r.q_target, float).copy(),
+            joints_measured_at=r.joint_at,
             gripper_measured=(width, grasped),
             gripper_measured_at=t_grip,
-            gripper_ctrl=self._gripper_ctrl,
+            gripper_ctrl=r.gripper_ctrl,
             tcp=d.site_xpos[self._site].copy(),
             tcp_rotation=d.site_xmat[self._site].reshape(3, 3).copy(),
             opening=self.opening,
-            fingers_settled=self._fingers_settled,
+            fingers_settled=r.fingers_settled,
             hose_vertices=tuple(self.world.hose_vertices(i) for i in range(len(self.world.hoses))),
         )
 
     def _publish(self) -> None:
-        state = self._make_state()
-        with self._published:
-            self._state = state
-            self._published.notify_all()
+        self._board.publish(self._make_state())
 
     def _render(self, wall: float) -> None:
         assert self.camera is not None
@@ -789,55 +549,8 @@ class TwinWorld:
         replayed = self._arm.fk(state.q_target)
         self.stats.tracking_mm.append(1000.0 * float(np.linalg.norm(replayed.position - state.tcp)))
         self.stats.lag_ms.append(1000.0 * (wall - state.twin_time))
-        with self._lock:
-            self._frames.append(frame)
-            while self._frames and self._frames[0].wall < wall - self.history:
-                self._frames.popleft()
+        self._frames.add(frame)
         for out in tuple(self.outputs):
             out(frame)
         self.stats.frames += 1
         self.stats.render_s += time.perf_counter() - t0
-
-    # ------------------------------------------------------------------ the sampler threads
-    def _start_samplers(self) -> None:
-        if any(t.is_alive() for t in self._samplers):
-            return
-        self._sampler_stop = threading.Event()
-        self._samplers = [
-            threading.Thread(target=self._sample, args=(read,), name=name, daemon=True)
-            for name, read in (
-                ("cablesim-twin-joints", self._read_joints),
-                ("cablesim-twin-gripper", self._read_gripper),
-            )
-        ]
-        for t in self._samplers:
-            t.start()
-
-    def _stop_samplers(self) -> None:
-        self._sampler_stop.set()
-        for t in self._samplers:
-            t.join(5.0)
-        self._samplers = []
-
-    def _sample(self, read: Callable[[], None]) -> None:
-        try:
-            while not (self._sampler_stop.is_set() or self._stop.is_set()):
-                read()
-        except BaseException as e:  # noqa: BLE001 - handed to the other threads
-            self.error = e
-            self._stop.set()
-            self._wake.set()
-
-    def _read_joints(self) -> None:
-        assert self.source is not None
-        t0 = time.monotonic()
-        q, dq = self.source.joint_state()
-        t = 0.5 * (t0 + time.monotonic())
-        self._joints.add(t, (np.asarray(q, float).copy(), np.asarray(dq, float).copy()))
-        self._sampler_stop.wait(self.joint_period)
-
-    def _read_gripper(self) -> None:
-        assert self.source is not None
-        width, grasped = self.source.gripper_state()
-        self._grip.add(time.monotonic(), (float(width), bool(grasped)))
-        self._sampler_stop.wait(0.002)  # a franky read blocks ~17 ms by itself
