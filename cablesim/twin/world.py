@@ -1,6 +1,6 @@
 """The digital twin: a cablesim world that follows a real-protocol robot in real time.
 
-    twin = TwinWorld(EpisodeConfig(seed=0))                   # built, settled, paused
+    twin = TwinWorld(EpisodeConfig.of(seed=0))                   # built, settled, paused
     robot = FrankyPanda(host, twin.T_world_camera, twin.T_world_base,
                         obstacles=twin.obstacles, realtime=False)
     robot.move_joints(twin.park, check=False)     # the robot starts where the twin's arm is
@@ -77,7 +77,7 @@ from cablesim.panda.ik import ArmModel, Obstacle, static_obstacles
 from cablesim.panda.model import joint_qpos_addresses, robot_body_ids
 from cablesim.perception.frames import Intrinsics
 from cablesim.sim.camera import SimCamera, SimSnapshot, intrinsics_from_fovy
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import EpisodeConfig
 from cablesim.sim.world import World
 
 T = TypeVar("T")
@@ -314,7 +314,7 @@ class TwinWorld:
         finger_rest_speed: float = 0.002,
         gripper_speed: tuple[float, float] = (0.05, 0.1),
     ) -> None:
-        self.cfg = config.validate()
+        self.cfg = config
         if not 0 < fps <= 60:
             raise InputError(f"fps must be in (0, 60], got {fps}")
         self.fps = float(fps)
@@ -329,7 +329,7 @@ class TwinWorld:
         self.finger_rest_speed = float(finger_rest_speed)
         self.gripper_speed = (float(gripper_speed[0]), float(gripper_speed[1]))
         if world is None:
-            world = World.build(self.cfg.scene_config())
+            world = World.build(self.cfg.scene)
         world.reset()
         if world.panda is None or world.panda_base is None:
             raise InputError("the twin needs a scene with the Panda (robot.enabled)")
