@@ -336,8 +336,9 @@ def override(cfg: T, assignment: str) -> T:
 def replace_paths(cfg: T, values: Mapping[str, Any], shortcuts: bool = True) -> T:
     """``cfg`` with each dotted path of ``values`` set (a value may be a config dataclass: its
     fields are set; a field inside it given too wins), built anew through :func:`from_dict`:
-    every value is type-checked and the result validated once, whatever the order.  With ``shortcuts``, a key without a dot may be
-    one of the class's ``SHORTCUTS`` (``seed`` -> ``episode.scene.seed``)."""
+    every value is type-checked and the result validated once, whatever the order.  With
+    ``shortcuts``, a key without a dot may be one of the class's ``SHORTCUTS`` (``seed`` ->
+    ``episode.scene.seed``)."""
     cls = type(cfg)
     table: Mapping[str, str] = getattr(cls, "SHORTCUTS", {}) if shortcuts else {}
     names = {f.name for f in dataclasses.fields(cfg)}  # type: ignore[arg-type]

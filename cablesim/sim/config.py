@@ -638,6 +638,7 @@ class EpisodeConfig(Config):
             {"seed": "scene.seed"},
             old_layout=True,
             dropped={
-                "progress": "progress lines are the command's --quiet or simulate_episode(progress=...)"
+                "progress": "print progress with the command (no --quiet) or "
+                "simulate_episode(progress=True)"
             },
         )
