@@ -114,15 +114,15 @@ def stream_digest(stream: Any, votes: np.ndarray | None) -> str:
 
 def episode_config(assignments: Sequence[str] = (), seed: int = 0) -> Any:
     """The default ``EpisodeConfig`` of ``seed`` with ``FIELD=VALUE`` assignments applied (the
-    fields of ``cablesim explore --show-config`` without their ``episode.`` prefix), validated;
+    fields of ``cablesim explore --show-config`` without their ``episode.`` prefix), checked;
     a bad field or value raises ``cablesim.errors.ConfigError`` naming it."""
     from cablesim.config import override
-    from cablesim.sim.session import EpisodeConfig
+    from cablesim.sim.config import EpisodeConfig
 
-    cfg = EpisodeConfig(seed=seed)
+    cfg = EpisodeConfig.of(seed=seed)
     for assignment in assignments:
         cfg = override(cfg, assignment)
-    return cfg.validate()
+    return cfg
 
 
 def run_interaction(session: Any, segment_mask: np.ndarray, perception: bool = True) -> Any:

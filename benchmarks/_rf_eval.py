@@ -152,7 +152,7 @@ class RecordedOracle(OracleFlow):
 def board_crop(scene: Scene, K: Intrinsics, margin: int = 8) -> tuple[int, int, int, int]:
     from cablesim.sim.regions import board_region
 
-    return board_region(scene.config().scene_config(), K, margin)
+    return board_region(scene.config().scene, K, margin)
 
 
 FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {

@@ -1,7 +1,7 @@
 """Recording half of ``benchmarks/realistic_flow.py``: one grasp interaction per scene, recorded
 once into a cache outside the repository and reused by every perception variant.
 
-Each scene: ``EpisodeConfig(seed=s, perturb=PerturbConfig(enabled=True))`` with kinematic arm
+Each scene: ``EpisodeConfig.of(seed=s, perturb=PerturbConfig(enabled=True))`` with kinematic arm
 masks captured (``capture.arm_masks``), ground truth on, the camera noise-free (the noise
 models of :mod:`cablesim.sim.sensor` are applied to the recorded clean images when perception
 runs, so every noisy result has its noise-free twin on the very same interaction).  A scene
@@ -67,9 +67,13 @@ class Scene:
 
     def config(self):
         from cablesim.episode.config import ActionConfig, CaptureConfig, InteractionConfig
-        from cablesim.sim.config import BoardConfig, CameraConfig, SceneConfig
-        from cablesim.sim.perturb import PerturbConfig
-        from cablesim.sim.session import EpisodeConfig
+        from cablesim.sim.config import (
+            BoardConfig,
+            CameraConfig,
+            EpisodeConfig,
+            PerturbConfig,
+            SceneConfig,
+        )
 
         if self.geometry not in GEOMETRIES:
             raise ValueError(f"geometry {self.geometry!r}: not one of {GEOMETRIES}")
@@ -80,8 +84,9 @@ class Scene:
             camera = CameraConfig(width=320, height=240)
             actions = ActionConfig(periods=2)
         return EpisodeConfig(
-            seed=self.seed,
-            scene=SceneConfig(board=BoardConfig(background=self.board), camera=camera),
+            scene=SceneConfig(
+                seed=self.seed, board=BoardConfig(background=self.board), camera=camera
+            ),
             interaction=InteractionConfig(actions=actions, capture=CaptureConfig(arm_masks=True)),
             perturb=PerturbConfig(enabled=True),
         )

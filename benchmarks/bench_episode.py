@@ -70,9 +70,10 @@ def main() -> int:
 
     core = None if args.no_pin else pin_to_one_core()
     load_start = uptime()
-    from cablesim.sim.session import EpisodeConfig, SimSession
+    from cablesim.sim.config import EpisodeConfig
+    from cablesim.sim.session import SimSession
 
-    cfg = EpisodeConfig(seed=args.seed, hose=args.hose)
+    cfg = EpisodeConfig.of(seed=args.seed, hose=args.hose)
     session = SimSession.build(cfg)
     segment = session.pick_start()
     hose = session.hose

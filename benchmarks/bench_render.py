@@ -54,8 +54,7 @@ def cpu_per_call(fn, frames: int, repeats: int) -> float:
 
 
 def measure(visual: str, frames: int, repeats: int) -> dict[str, float]:
-    cfg = SceneConfig(seed=0)
-    cfg.robot.visual = visual
+    cfg = SceneConfig(seed=0).with_values({"robot.visual": visual})
     builds = []
     for _ in range(3):  # the first build may settle (or load) the state and import modules
         t0 = time.process_time()

@@ -62,9 +62,10 @@ def run(seed: int, timestep: float) -> dict:
     import cablesim.episode.primitives as prim
     import cablesim.sim.world as world_mod
     from cablesim.config import override
-    from cablesim.sim.session import EpisodeConfig, SimSession
+    from cablesim.sim.config import EpisodeConfig
+    from cablesim.sim.session import SimSession
 
-    cfg = override(EpisodeConfig(seed=seed), f"scene.physics.timestep={timestep}")
+    cfg = override(EpisodeConfig.of(seed=seed), f"scene.physics.timestep={timestep}")
     session = SimSession.build(cfg)
     segment = session.pick_start()
     hose = session.hose
@@ -183,9 +184,10 @@ def replay(seed: int, t_save: float, duration: float) -> dict:
     import mujoco
 
     from cablesim.config import override
-    from cablesim.sim.session import EpisodeConfig, SimSession
+    from cablesim.sim.config import EpisodeConfig
+    from cablesim.sim.session import SimSession
 
-    cfg = override(EpisodeConfig(seed=seed), "scene.physics.max_hose_strain=10.0")
+    cfg = override(EpisodeConfig.of(seed=seed), "scene.physics.max_hose_strain=10.0")
     session = SimSession.build(cfg)
     segment = session.pick_start()
     w = session.world

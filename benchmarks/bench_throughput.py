@@ -43,10 +43,11 @@ RESULTS = Path(__file__).parent / "results" / "throughput.md"
 def episode(seed: int) -> dict:
     """One seeded episode in a worker: build (cached settle), pick, interact, perceive."""
     import cablesim  # noqa: F401
-    from cablesim.sim.session import EpisodeConfig, SimSession
+    from cablesim.sim.config import EpisodeConfig
+    from cablesim.sim.session import SimSession
 
     t0, c0 = time.perf_counter(), time.process_time()
-    session = SimSession.build(EpisodeConfig(seed=seed))
+    session = SimSession.build(EpisodeConfig.of(seed=seed))
     try:
         segment = session.pick_start()
         t1, c1 = time.perf_counter(), time.process_time()
@@ -63,11 +64,11 @@ def episode(seed: int) -> dict:
 
 def warm_cache(seeds: list[int]) -> None:
     import cablesim  # noqa: F401
-    from cablesim.sim.session import EpisodeConfig
+    from cablesim.sim.config import SceneConfig
     from cablesim.sim.world import World
 
     for s in seeds:
-        World.build(EpisodeConfig(seed=s).scene_config())
+        World.build(SceneConfig(seed=s))
 
 
 def run_pool(seeds: list[int], workers: int) -> tuple[float, list[dict]]:

@@ -30,8 +30,7 @@ from _machine import cpu_model, write_results  # noqa: E402  (benchmarks/ is on 
 import cablesim  # noqa: F401  (selects the headless GL back end)
 from cablesim.episode.config import ActionConfig, InteractionConfig
 from cablesim.progress import Progress
-from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
 from cablesim.twin import FrankaSimServer
 from cablesim.twin.episode import sim_episode, twin_episode
 
@@ -40,8 +39,7 @@ RESULTS = Path(__file__).parent / "results" / "twin.md"
 
 def config(seed: int) -> EpisodeConfig:
     return EpisodeConfig(
-        seed=seed,
-        scene=SceneConfig(hoses=HoseConfig(count=3), camera=CameraConfig(320, 240)),
+        scene=SceneConfig(seed=seed, hoses=HoseConfig(count=3), camera=CameraConfig(320, 240)),
         interaction=InteractionConfig(actions=ActionConfig(periods=1)),
     )
 

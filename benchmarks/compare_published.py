@@ -45,10 +45,11 @@ def recording(seed: int, root: Path) -> tuple[Path | None, str]:
         meta = json.loads((path / "meta.json").read_text()).get("meta") or {}
         result = meta.get("result") or {}
         return (path, "") if result.get("success") else (None, str(result.get("reason"))[:80])
+    from cablesim.sim.config import EpisodeConfig
     from cablesim.sim.perturb import PerturbConfig
-    from cablesim.sim.session import EpisodeConfig, simulate_episode
+    from cablesim.sim.session import simulate_episode
 
-    cfg = EpisodeConfig(seed=seed, perturb=PerturbConfig(enabled=True), progress=False)
+    cfg = EpisodeConfig.of(seed=seed, perturb=PerturbConfig(enabled=True))
     try:
         ep = simulate_episode(cfg, record_to=path, overwrite=True)
     except Exception as e:  # noqa: BLE001 - a failed seed is reported, not fatal
@@ -111,7 +112,7 @@ def main() -> None:
         f"- machine: {cpu_model()}, {os.cpu_count()} cores, {platform.platform()}; load average "
         f"at start / end {' '.join(f'{x:.2f}' for x in load0)} / "
         f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}",
-        "- interactions: `simulate_episode(EpisodeConfig(seed=s, "
+        "- interactions: `simulate_episode(EpisodeConfig.of(seed=s, "
         "perturb=PerturbConfig(enabled=True)))`, default scene (4 hoses, 640x480, camera noise "
         "models off), two actions (along, across), K_p = 3, |D| = 2 cm",
         "- thresholds of SPEC beta = 0.4: correlation and published R^2 0.86, |c0| 0.18; "

@@ -63,7 +63,8 @@ def run_seed(
 
     import cablesim  # noqa: F401  (headless GL before mujoco)
     from cablesim.errors import outcome_of
-    from cablesim.sim.session import EpisodeConfig, simulate_episode
+    from cablesim.sim.config import EpisodeConfig
+    from cablesim.sim.session import simulate_episode
 
     t0, c0 = time.perf_counter(), _cpu()
     row: dict[str, Any] = {"seed": seed}

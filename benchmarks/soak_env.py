@@ -80,7 +80,7 @@ def main() -> int:
     if args.episodes < 1 or args.budget not in (1, 2):
         ap.error("need --episodes >= 1 and --budget 1 or 2")
 
-    cfg = HoseExploreConfig(
+    cfg = HoseExploreConfig.of(
         scene_seed=args.scene_seed,
         hoses=2,
         width=args.width,

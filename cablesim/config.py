@@ -1,23 +1,31 @@
 """Helpers shared by the typed, seeded, printable configuration dataclasses.
 
-One validation style: :func:`check_fields` checks every field of a config dataclass against
-its type hint (an ``int`` field takes an integer but not a bool, a ``float`` field a finite
-real number, a ``str`` a string, a ``tuple[...]`` a sequence of the right length, ...) and
-raises :class:`~cablesim.errors.ConfigError` naming the field and the value; :func:`from_dict`
-checks the values of a mapping the same way before it builds anything.  The ``check_*``
-helpers validate ranges on top of that.
+One validation style: a config is checked when it is made.  :class:`Config` runs, after the
+dataclass ``__init__``, :func:`check_fields` (every field against its type hint: an ``int``
+field takes an integer but not a bool, a ``float`` field a finite real number, a ``str`` a
+string, a ``tuple[...]`` a sequence of the right length, ...) and then the class's own
+``_validate`` (ranges, choices, fields that depend on each other), so a config that exists is
+valid; the config classes are frozen, so it stays valid (change one with ``replace`` or
+:meth:`Config.with_values`, which build a new, checked config).  Every check raises
+:class:`~cablesim.errors.ConfigError` naming the field and the value; :func:`from_dict` checks
+the values of a mapping the same way before it builds anything, names nested fields by their
+full dotted path (``episode.scene.camera.width``) and moves the fields of config files written
+by earlier versions to where they live now (:class:`ConfigMigrationWarning`).  The ``check_*``
+helpers validate ranges.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import numbers
 import types
 import typing
-from collections.abc import Callable
-from typing import Any, TypeVar
+import warnings
+from collections.abc import Callable, Mapping
+from typing import Any, ClassVar, TypeVar
 
 from cablesim.errors import ConfigError
 
@@ -25,6 +33,11 @@ T = TypeVar("T")
 
 #: Makes the error a check raises: ``error(field, message)``.
 ErrorFactory = Callable[[str, str], Exception]
+
+
+class ConfigMigrationWarning(UserWarning):
+    """A config written by an earlier cablesim was loaded: a field of it moved (the message
+    names its old and its new place) or is no longer a config field."""
 
 
 def to_dict(cfg: Any) -> dict[str, Any]:
@@ -68,6 +81,7 @@ def _np_bool() -> type:
     return np.bool_
 
 
+@functools.cache
 def _hints(cls: type) -> dict[str, Any]:
     try:
         return typing.get_type_hints(cls)
@@ -180,9 +194,14 @@ def _from_value(hint: Any, value: Any, field: str) -> Any:
 
 def from_dict(cls: type[T], data: dict[str, Any], path: str = "") -> T:
     """Rebuild a config dataclass from ``to_dict`` output; unknown keys and values of the
-    wrong type are a ``ConfigError`` naming the field."""
+    wrong type are a ``ConfigError`` naming the field by its dotted path from the top
+    (``path`` is the prefix of ``cls``'s fields, e.g. ``"episode.scene."``).  A class with a
+    ``_migrate(data, path)`` classmethod first moves the fields of its earlier layouts."""
     if not isinstance(data, dict):
         raise ConfigError(path.rstrip(".") or cls.__name__, f"expected a mapping, got {data!r}")
+    migrate = getattr(cls, "_migrate", None)
+    if migrate is not None:
+        data = migrate(dict(data), path)
     hints = _hints(cls)
     names = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     unknown = sorted(str(k) for k in set(data) - names)
@@ -194,7 +213,100 @@ def from_dict(cls: type[T], data: dict[str, Any], path: str = "") -> T:
         value = _from_value(hint, value, f"{path}{name}")
         check_value(f"{path}{name}", value, hint)
         kwargs[name] = value
-    return cls(**kwargs)
+    try:
+        return cls(**kwargs)
+    except ConfigError as e:
+        if not path:
+            raise
+        field = _rebase(e.field, getattr(cls, "SECTION", ""), path)
+        raise ConfigError(field, _message(e)) from None
+
+
+def _message(e: ConfigError) -> str:
+    """The message of ``e`` without its field."""
+    text = str(e)
+    head = f"{e.field}: "
+    return text[len(head) :] if text.startswith(head) else text
+
+
+def _rebase(field: str, section: str, path: str) -> str:
+    """``field`` as a config of section ``section`` names it (``camera.width``), named from
+    where that config sits (``path``, e.g. ``episode.scene.camera.``)."""
+    base = path.rstrip(".")
+    if not section:
+        rest = field if field.startswith("[") else f".{field}"
+    elif field == section:
+        rest = ""
+    elif field.startswith(section) and field[len(section)] in ".[/":
+        rest = field[len(section) :]
+    else:
+        return field
+    return base + rest
+
+
+def moved_fields(
+    data: dict[str, Any],
+    path: str,
+    moves: Mapping[str, str],
+    *,
+    old_layout: bool,
+    dropped: Mapping[str, str] | None = None,
+    null_keeps: tuple[str, ...] = (),
+) -> dict[str, Any]:
+    """``data`` (a config mapping at ``path``) with the fields ``moves`` names (old name ->
+    new dotted path below ``data``) moved to their new place, each with a
+    :class:`ConfigMigrationWarning` naming the old and the new field; the fields ``dropped``
+    names (name -> why) are removed with a warning.
+
+    ``old_layout``: the file is of the earlier layout as a whole, where the old field was the
+    one the run used and the new place held a value the run overwrote (it is replaced, and the
+    warning says so).  Otherwise (a file that mixes layouts) an old field whose new place holds
+    another value is a ``ConfigError`` naming both: which one to take is not known.  An old
+    field named in ``null_keeps`` moves nothing when it is null (the earlier runs kept the
+    nested value then)."""
+    data = dict(data)
+    for name, why in (dropped or {}).items():
+        if name in data:
+            value = data.pop(name)
+            _warn(f"{path}{name} ({_json(value)}) is no longer a config field: {why}")
+    for old, new in moves.items():
+        if old not in data:
+            continue
+        value = data.pop(old)
+        node = data
+        keys = new.split(".")
+        for key in keys[:-1]:
+            child = node.get(key, {})
+            if not isinstance(child, dict):
+                raise ConfigError(f"{path}{old}", f"moved to {path}{new}, but {key} is no section")
+            node[key] = child = dict(child)
+            node = child
+        last = keys[-1]
+        if value is None and old in null_keeps:
+            kept = f" ({_json(node[last])})" if last in node else ""
+            _warn(f"{path}{old} moved to {path}{new}; null here, so {path}{new}{kept} stays")
+            continue
+        note = ""
+        if last in node and node[last] != value:
+            if not old_layout:
+                raise ConfigError(
+                    f"{path}{old}",
+                    f"moved to {path}{new}, and the file gives both ({_json(value)} and "
+                    f"{_json(node[last])}): keep one of them",
+                )
+            note = f"; the file's {path}{new} ({_json(node[last])}) was not what its run used"
+        node[last] = value
+        _warn(f"{path}{old} moved to {path}{new} ({_json(value)}){note}")
+    return data
+
+
+def _json(value: Any) -> str:
+    text = json.dumps(value, default=str, separators=(",", ":"))
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _warn(message: str) -> None:
+    warnings.warn(ConfigMigrationWarning(message), stacklevel=4)
 
 
 def parse_value(text: str) -> Any:
@@ -213,24 +325,55 @@ def override(cfg: T, assignment: str) -> T:
     """``cfg`` (a config dataclass) with one field set from ``"dotted.path=value"`` (the value
     as :func:`parse_value` reads it), rebuilt through :func:`from_dict` so that the new value
     is type-checked like a loaded file; an unknown path or a bad value is a ``ConfigError``
-    naming the field."""
+    naming the field (and, for a field that moved or has a shortcut, where it lives)."""
     path, sep, text = assignment.partition("=")
     path = path.strip()
     if not sep or not path:
         raise ConfigError("--set", f"expected FIELD=VALUE, got {assignment!r}")
+    return replace_paths(cfg, {path: parse_value(text.strip())}, shortcuts=False)
+
+
+def replace_paths(cfg: T, values: Mapping[str, Any], shortcuts: bool = True) -> T:
+    """``cfg`` with each dotted path of ``values`` set (a value may be a config dataclass: its
+    fields are set; a field inside it given too wins), built anew through :func:`from_dict`:
+    every value is type-checked and the result validated once, whatever the order.  With
+    ``shortcuts``, a key without a dot may be one of the class's ``SHORTCUTS`` (``seed`` ->
+    ``episode.scene.seed``)."""
+    cls = type(cfg)
+    table: Mapping[str, str] = getattr(cls, "SHORTCUTS", {}) if shortcuts else {}
+    names = {f.name for f in dataclasses.fields(cfg)}  # type: ignore[arg-type]
+    changes = {(table[k] if k in table and k not in names else k): v for k, v in values.items()}
+    implied = getattr(cls, "_implied", None)
+    if implied is not None:
+        changes = implied(changes)
     data = to_dict(cfg)
+    # a section before the fields inside it: ``episode`` and then ``episode.scene.seed``
+    for path, value in sorted(changes.items(), key=lambda kv: kv[0].count(".")):
+        _set_path(cls, data, path, to_dict(value))
+    return from_dict(cls, data)
+
+
+def _set_path(cls: type, data: dict[str, Any], path: str, value: Any) -> None:
     node: Any = data
     keys = path.split(".")
     for i, key in enumerate(keys):
         where = ".".join(keys[: i + 1])
         if not isinstance(node, dict) or key not in node:
             known = ", ".join(sorted(node)) if isinstance(node, dict) else "none (not a section)"
-            raise ConfigError(where, f"no such field (fields here: {known})")
+            raise ConfigError(where, f"no such field{_hint(cls, path)} (fields here: {known})")
         if i == len(keys) - 1:
-            node[key] = parse_value(text.strip())
+            node[key] = value
         else:
             node = node[key]
-    return from_dict(type(cfg), data)
+
+
+def _hint(cls: type, path: str) -> str:
+    """Where a field that is not at ``path`` lives: it moved, or ``path`` is a shortcut."""
+    moved = getattr(cls, "MOVED", {}).get(path)
+    if moved:
+        return f"; it moved to {moved}"
+    short = getattr(cls, "SHORTCUTS", {}).get(path)
+    return f"; the shortcut {path} writes {short}" if short else ""
 
 
 def flatten(cfg: Any) -> list[tuple[str, Any]]:
@@ -303,11 +446,52 @@ def check_vector(
 
 
 class Config:
-    """Mixin of the top-level config dataclasses: ``replace``, ``to_dict``, ``from_dict`` and a
-    JSON ``str`` (every config is typed, printable and reloadable the same way)."""
+    """Base of the config dataclasses: checked when made, printable, reloadable.
+
+    A subclass (a ``@dataclass(frozen=True)``) that defines ``_validate(self)`` is checked on
+    construction: :func:`check_fields` (types, named ``SECTION.field``) and then
+    ``_validate``, which raises ``ConfigError`` naming the first impossible field.  A config
+    that exists is therefore valid, and :meth:`validate` has nothing left to check (it returns
+    the config, for code written when the check was a separate call).
+
+    ``SECTION`` is how the class's errors name its fields when it is made on its own
+    (``camera`` -> ``camera.width``); built through :func:`from_dict` (a file, ``--set``,
+    :meth:`with_values`) they are named by their full path (``episode.scene.camera.width``).
+    ``SHORTCUTS`` maps short names to the dotted path they write (``seed`` ->
+    ``episode.scene.seed``): :meth:`of`, :meth:`with_values` and :meth:`replace` accept them;
+    ``MOVED`` maps fields of earlier layouts to their place now (for error hints)."""
+
+    SECTION: ClassVar[str] = ""
+    SHORTCUTS: ClassVar[Mapping[str, str]] = {}
+    MOVED: ClassVar[Mapping[str, str]] = {}
+
+    def __post_init__(self) -> None:
+        check = getattr(self, "_validate", None)
+        if check is not None:
+            check_fields(self, f"{self.SECTION}." if self.SECTION else "")
+            check()
+
+    def validate(self: T) -> T:
+        """The config itself: it was checked when it was made."""
+        return self
 
     def replace(self: T, **changes: Any) -> T:
-        return dataclasses.replace(self, **changes)  # type: ignore[type-var]
+        """A copy with ``changes`` (field names, or the class's ``SHORTCUTS``), checked."""
+        names = {f.name for f in dataclasses.fields(self)}  # type: ignore[arg-type]
+        if set(changes) <= names:
+            return dataclasses.replace(self, **changes)  # type: ignore[type-var]
+        return replace_paths(self, changes)
+
+    def with_values(self: T, values: Mapping[str, Any] | None = None, /, **more: Any) -> T:
+        """A copy with the dotted paths of ``values`` (``{"scene.camera.width": 160}``) and the
+        fields or shortcuts of ``more`` set, checked once (see :func:`replace_paths`)."""
+        return replace_paths(self, {**(values or {}), **more})
+
+    @classmethod
+    def of(cls: type[T], values: Mapping[str, Any] | None = None, /, **more: Any) -> T:
+        """The default config with ``values`` / ``more`` set (see :meth:`with_values`):
+        ``EpisodeConfig.of(seed=3, width=160, height=120)``."""
+        return replace_paths(cls(), {**(values or {}), **more})
 
     def to_dict(self) -> dict[str, Any]:
         return to_dict(self)

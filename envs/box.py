@@ -28,7 +28,6 @@ ground-truth flow for segmentation and DIS for carrying votes between images.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -40,9 +39,13 @@ from cablesim.episode.config import (
     InteractionConfig,
     RetreatConfig,
 )
-from cablesim.errors import ConfigError
-from cablesim.sim.config import PhysicsConfig, SceneConfig
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import (
+    CameraConfig,
+    EpisodeConfig,
+    HoseConfig,
+    PhysicsConfig,
+    SceneConfig,
+)
 
 from .hose_explore import HoseExploreConfig, HoseExploreEnv
 from .wrappers import AimedBoxAction, BoxAction, ImageObservation
@@ -52,30 +55,27 @@ BOX_ENV_ID = "cablesim/HoseExploreBox-v0"
 
 def fast_config(**changes: Any) -> HoseExploreConfig:
     """The fast learning configuration (module docstring); ``changes`` replace
-    ``HoseExploreConfig`` fields (e.g. ``budget=1``, ``scene_seed=3``)."""
+    ``HoseExploreConfig`` fields or shortcuts (e.g. ``budget=1``, ``scene_seed=3``,
+    ``hoses=3``), checked (an unknown name is a ``ConfigError`` naming it)."""
     interaction = InteractionConfig(
         grasp=GraspConfig(travel_speed=0.5, approach_speed=0.1),
         actions=ActionConfig(directions=("along",), periods=1, speed=0.1),
         capture=CaptureConfig(frame_rate=10.0),
         retreat=RetreatConfig(speed_factor=1.0),
     )
-    scene = SceneConfig(physics=PhysicsConfig(timestep=0.008))
+    scene = SceneConfig(
+        seed=2,
+        hoses=HoseConfig(count=2),
+        camera=CameraConfig(width=160, height=120),
+        physics=PhysicsConfig(timestep=0.008),
+    )
     cfg = HoseExploreConfig(
-        scene_seed=2,
-        hoses=2,
-        width=160,
-        height=120,
         budget=2,
-        periods=1,
         flow="oracle",
         merge="dis",
         episode=EpisodeConfig(scene=scene, interaction=interaction),
     )
-    names = {f.name for f in dataclasses.fields(HoseExploreConfig)}
-    for name in changes:
-        if name not in names:
-            raise ConfigError(name, f"HoseExploreConfig has no field {name!r}")
-    return dataclasses.replace(cfg, **changes)
+    return cfg.with_values(changes) if changes else cfg
 
 
 def make_box_env(

@@ -1,7 +1,7 @@
 """A ``dm_env`` view of :class:`~cablesim.envs.hose_explore.HoseExploreEnv`.
 
     from cablesim.envs.dm import DmEnvAdapter
-    env = DmEnvAdapter(HoseExploreConfig(width=160, height=120), seed=0)
+    env = DmEnvAdapter(HoseExploreConfig.of(width=160, height=120), seed=0)
     ts = env.reset()                      # TimeStep(FIRST), ts.observation: dict of arrays
     ts = env.step({"primitive": 0, "point": np.array([0.5, 0.4], np.float32),
                    "angle": np.array([0.0], np.float32)})

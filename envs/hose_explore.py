@@ -2,13 +2,14 @@
 
     import gymnasium as gym
     import cablesim.envs  # registers the environment
-    env = gym.make("cablesim/HoseExplore-v0", config=HoseExploreConfig(width=160, height=120))
+    env = gym.make("cablesim/HoseExplore-v0", config=HoseExploreConfig.of(width=160, height=120))
     obs, info = env.reset(seed=0)
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
 
 Each episode is a simulated session (:class:`~cablesim.sim.session.SimSession`): the scene
-``config.scene_seed`` (fixed; ``randomize_scene=True`` uses the episode seed as scene seed
-instead) is reset to its settled state; an episode seed drawn from the reset seed names the
+``config.episode.scene`` (its seed, the shortcut ``scene_seed``, is fixed;
+``randomize_scene=True`` uses the episode seed as scene seed instead) is reset to its settled
+state; an episode seed drawn from the reset seed names the
 random streams (:mod:`cablesim.seeding`) that draw the hose of interest and a visible,
 graspable start segment of it (the stand-in for a person's click, given to the agent as
 ``obs["segment"]``) and the neighbour perturbation.  Every step is one interaction.
@@ -25,13 +26,14 @@ graspable start segment of it (the stand-in for a person's click, given to the a
 
 An action that is not such a dict (a missing key, a primitive other than 0 or 1, a point or
 angle that is not finite) raises ``InputError`` naming the key and the value; finite points
-outside [0, 1] are clipped to the image.  The config is checked when the environment is made
-and at every ``reset`` (``ConfigError`` naming the field).
+outside [0, 1] are clipped to the image.  The config is checked when it is made
+(``ConfigError`` naming the field); configs are frozen, and ``reset`` refuses a config whose
+image size is not the one the environment was made with.
 
 The point and angle become a short line segment (``segment_length`` metres at the point's
 depth), from which the episode runner estimates the grasp centre and axis from depth (SPEC 3.1).
 
-**Observation** ``Dict`` (H x W = ``height`` x ``width``):
+**Observation** ``Dict`` (H x W = ``episode.scene.camera.height`` x ``.width``):
 
 - ``rgb``: uint8 (H, W, 3), the current image (the last target frame);
 - ``depth``: float32 (H, W), metres, 0 = invalid, clipped to [0, 10];
@@ -57,7 +59,6 @@ segment in magenta.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -67,10 +68,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from cablesim.config import check_fields, check_int, check_number, pretty, to_dict
+from cablesim.config import Config, check_int, check_number, moved_fields, to_dict
 from cablesim.errors import CablesimError, ConfigError, InputError
-from cablesim.sim.perturb import PerturbConfig
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import EPISODE_SHORTCUTS, EpisodeConfig
 
 PRIMITIVES = ("grasp", "push")
 FLOWS = ("oracle", "dis", "farneback")  # RAFT needs a checkpoint: not offered here
@@ -78,43 +78,62 @@ MERGES = ("dis", "oracle", "none")
 METHODS = ("correlation", "segmentation", "ablation")
 
 
-@dataclass
-class HoseExploreConfig:
-    """Scene, image size, budget and perception of :class:`HoseExploreEnv`."""
+#: Shortcut -> the nested field it writes (``HoseExploreConfig.of(width=320, hoses=2)``).
+ENV_SHORTCUTS: Mapping[str, str] = {
+    **{name: f"episode.{path}" for name, path in EPISODE_SHORTCUTS.items() if name != "seed"},
+    "scene_seed": "episode.scene.seed",
+    "hose": "episode.hose",
+    "perturb": "episode.perturb",
+}
 
-    scene_seed: int = 0
+#: Fields of the earlier layout (they overwrote ``episode``'s own) -> their place now.
+MOVED: Mapping[str, str] = {
+    "scene_seed": "episode.scene.seed",
+    "hoses": "episode.scene.hoses.count",
+    "width": "episode.scene.camera.width",
+    "height": "episode.scene.camera.height",
+    "periods": "episode.interaction.actions.periods",
+    "hose": "episode.hose",
+    "perturb": "episode.perturb",
+}
+
+#: The largest scene seed (reset draws episode seeds below 2**31 - 1).
+MAX_SCENE_SEED = 2**31 - 2
+
+
+def default_episode() -> EpisodeConfig:
+    """The environment's session: 160x120 images and actions of 2 periods (the thesis uses
+    3; 2 keeps steps short), 4 hoses, scene seed 0."""
+    return EpisodeConfig.of(width=160, height=120, periods=2)
+
+
+@dataclass(frozen=True)
+class HoseExploreConfig(Config):
+    """Budget and perception of :class:`HoseExploreEnv`, and its session (``episode``: the
+    scene with its seed, image size and hose count, the hose of interest, the interaction,
+    the perturbation).  ``HoseExploreConfig.of(scene_seed=2, hoses=2, width=160, height=120,
+    periods=1, budget=2)`` writes the shortcuts (:data:`ENV_SHORTCUTS`) into ``episode``."""
+
+    SHORTCUTS = ENV_SHORTCUTS
+    MOVED = MOVED
+
     randomize_scene: bool = False  # True: the episode seed is the scene seed (slower resets)
-    hoses: int = 4
-    width: int = 160
-    height: int = 120
     budget: int = 3  # interactions per episode
-    periods: int = 2  # K_p of each action (the thesis uses 3; 2 keeps steps short)
     flow: str = "oracle"  # "oracle" | "dis" | "farneback"; small images favour the oracle
     merge: str = "dis"  # how votes are carried between images: "dis" | "oracle" | "none"
     grasp_method: str = "correlation"
     push_method: str = "segmentation"
     merged_votes: int = 1
     segment_length: float = 0.04  # m, the line segment made from (point, angle)
-    hose: int | None = None  # None: drawn from the episode seed
-    perturb: PerturbConfig = field(default_factory=PerturbConfig)
-    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    episode: EpisodeConfig = field(default_factory=default_episode)
 
     def episode_config(self, seed: int) -> EpisodeConfig:
-        """The session of an episode: the scene of ``seed`` at the env's size and hose count."""
-        ep = dataclasses.replace(self.episode, seed=seed, hose=self.hose, progress=False)
-        scene = dataclasses.replace(ep.scene, seed=seed)
-        scene.hoses = dataclasses.replace(scene.hoses, count=self.hoses)
-        scene.camera = dataclasses.replace(scene.camera, width=self.width, height=self.height)
-        actions = dataclasses.replace(ep.interaction.actions, periods=self.periods)
-        interaction = dataclasses.replace(ep.interaction, actions=actions)
-        return dataclasses.replace(
-            ep, scene=scene, interaction=interaction, perturb=self.perturb
-        ).validate()
+        """The session of an episode: ``episode`` with the episode seed ``seed`` naming its
+        random streams (the world, built from ``episode.scene``, is reused)."""
+        return self.episode.replace(scene=self.episode.scene.replace(seed=seed))
 
-    def validate(self) -> HoseExploreConfig:
-        """``ConfigError`` naming the first impossible field; returns ``self``."""
-        check_fields(self)
-        check_int("scene_seed", self.scene_seed, 0, 2**31 - 2)
+    def _validate(self) -> None:
+        check_int("episode.scene.seed", self.episode.scene.seed, 0, MAX_SCENE_SEED)
         check_int("budget", self.budget, 1, 10_000)
         check_int("merged_votes", self.merged_votes, 1)
         for name, value, choices in (
@@ -126,14 +145,23 @@ class HoseExploreConfig:
             if value not in choices:
                 raise ConfigError(name, f"must be one of {choices}, got {value!r}")
         check_number("segment_length", self.segment_length, 1e-3, 0.5)
-        if self.hose is not None:
-            check_int("hose", self.hose, 0, self.hoses - 1)
-        self.perturb.validate()
-        self.episode_config(self.scene_seed)  # scene size, hose count, periods, interaction
-        return self
 
-    def __str__(self) -> str:
-        return pretty(self)
+    @classmethod
+    def _migrate(cls, data: dict[str, Any], path: str) -> dict[str, Any]:
+        """The earlier layout kept the scene seed, hose count, image size, periods, hose of
+        interest and perturbation at the top; they overwrote ``episode``'s own at every reset.
+        Such a file (its ``episode`` has a ``seed``) loads as it ran; a file that mixes
+        layouts is refused where the two places disagree."""
+        if not any(name in data for name in MOVED):
+            return data
+        episode = data.get("episode")
+        old = isinstance(episode, dict) and "seed" in episode
+        if old:
+            assert isinstance(episode, dict)
+            data["episode"] = {k: v for k, v in episode.items() if k not in ("seed", "progress")}
+        elif episode is None:  # the old defaults were the environment's: start from them
+            data["episode"] = default_episode().to_dict()
+        return moved_fields(data, path, MOVED, old_layout=old)
 
 
 def check_action(action: Any) -> tuple[int, np.ndarray, float]:
@@ -174,14 +202,14 @@ class HoseExploreEnv(gym.Env):
         self.config = config or HoseExploreConfig()
         if not isinstance(self.config, HoseExploreConfig):
             raise ConfigError("config", f"expected a HoseExploreConfig, got {self.config!r}")
-        self.config.validate()
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(
                 "render_mode",
                 f"must be one of {self.metadata['render_modes']}, got {render_mode!r}",
             )
         self.render_mode = render_mode
-        h, w = self.config.height, self.config.width
+        cam = self.config.episode.scene.camera
+        h, w = cam.height, cam.width
         self.action_space = spaces.Dict(
             {
                 "primitive": spaces.Discrete(2),
@@ -220,7 +248,7 @@ class HoseExploreEnv(gym.Env):
             if self._camera is not None:
                 self._camera.close()
                 self._camera = None
-            self._world = World.build(self.config.episode_config(scene_seed).scene_config())
+            self._world = World.build(self.config.episode.scene.replace(seed=scene_seed))
             self._world_seed = scene_seed
         return self._world, self._camera
 
@@ -234,22 +262,26 @@ class HoseExploreEnv(gym.Env):
 
         if seed is not None and (not isinstance(seed, int | np.integer) or seed < 0):
             raise InputError(f"reset seed must be None or an integer >= 0, got {seed!r}")
-        cfg = self.config.validate()
-        if (cfg.height, cfg.width) != self.observation_space["rgb"].shape[:2]:
+        cfg = self.config
+        if not isinstance(cfg, HoseExploreConfig):
+            raise ConfigError("config", f"expected a HoseExploreConfig, got {cfg!r}")
+        cam = cfg.episode.scene.camera
+        if (cam.height, cam.width) != self.observation_space["rgb"].shape[:2]:
             raise ConfigError(
-                "width/height",
-                f"{cfg.width}x{cfg.height} differs from the observation space the environment "
+                "episode.scene.camera.width/height",
+                f"{cam.width}x{cam.height} differs from the observation space the environment "
                 "was made with; make a new environment",
             )
         super().reset(seed=None if seed is None else int(seed))
         episode_seed = int(self.np_random.integers(2**31 - 1))
-        scene_seed = episode_seed if cfg.randomize_scene else cfg.scene_seed
+        scene_seed = episode_seed if cfg.randomize_scene else cfg.episode.scene.seed
         world, camera = self._scene(scene_seed)
         # a reused world: the session's seed names only the episode's random streams
         session = SimSession.build(cfg.episode_config(episode_seed), world=world, camera=camera)
         self._session, self._camera = session, session.camera
         n = len(world.hoses)
-        order = [cfg.hose] if cfg.hose is not None else list(session.rng.permutation(n))
+        hose = cfg.episode.hose
+        order = [hose] if hose is not None else list(session.rng.permutation(n))
         picked, reasons = None, []
         for hose in order:
             try:
@@ -318,7 +350,8 @@ class HoseExploreEnv(gym.Env):
     def _line_segment(self, point: np.ndarray, angle: float) -> np.ndarray | None:
         from cablesim.perception.geometry import line_segment_mask
 
-        h, w = self.config.height, self.config.width
+        cam = self.config.episode.scene.camera
+        h, w = cam.height, cam.width
         pt = np.clip(point, 0.0, 1.0)
         img = self._image
         return line_segment_mask(

@@ -1,7 +1,7 @@
 """Exploration policies: several interactions on one hose, votes merged (thesis chapter 6).
 
     from cablesim.policies import ExploreConfig, PerturbConfig, explore
-    res = explore(ExploreConfig(seed=0, perturb=PerturbConfig(enabled=True)), out="runs/demo")
+    res = explore(ExploreConfig.of(seed=0, perturb=PerturbConfig(enabled=True)), out="runs/demo")
     print(res.summary())
 
 Modules: ``config`` (ExploreConfig), ``explore`` (the loop over a simulated or real session,
@@ -9,7 +9,7 @@ the random-grasp and push baselines), ``merge`` (votes carried between target fr
 ``report`` (pictures, video, metrics).
 """
 
-from cablesim.sim.perturb import PerturbConfig
+from cablesim.sim.config import PerturbConfig
 
 from .config import STRATEGIES, ExploreConfig
 from .merge import VoteMerger, warp_votes

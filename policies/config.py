@@ -1,41 +1,75 @@
 """Typed, seeded, printable configuration of an exploration (several interactions on one hose).
 
-    cfg = ExploreConfig(seed=0, grasps=3, flow="dis")
+    cfg = ExploreConfig.of(seed=0, grasps=3, flow="dis", width=320, height=240)
     print(cfg)                                   # JSON; ExploreConfig.from_dict(...) rebuilds it
-    cfg.episode_config()                         # the EpisodeConfig every interaction uses
+    cfg.episode                                  # the EpisodeConfig every interaction uses
 
-``seed`` is the one seed: it is the scene seed, and its named streams (:mod:`cablesim.seeding`)
-draw the hose of interest (when ``hose`` is None) and the start segment (``episode``, exactly
-as :func:`cablesim.sim.session.simulate_episode` does), the neighbour perturbation
-(``perturb``) and the random-grasp baseline (``baseline``).
+Each field has one owner: the exploration's own fields sit at the top, everything about the
+simulated session (the seed, the hose of interest, the scene with its image size and hose
+count, the interaction, the perturbation) in ``episode``.  The shortcuts of :meth:`of`,
+:meth:`~cablesim.config.Config.with_values` and the command line (``seed``, ``hose``,
+``width``, ``height``, ``hoses``, ``periods``, ``perturb``, ...) write into those nested fields
+(:data:`EXPLORE_SHORTCUTS`).
+
+``episode.scene.seed`` is the one seed (``cfg.seed`` reads it): it is the scene seed, and its
+named streams (:mod:`cablesim.seeding`) draw the hose of interest (when ``episode.hose`` is
+None) and the start segment (``episode``, exactly as
+:func:`cablesim.sim.session.simulate_episode` does), the neighbour perturbation (``perturb``)
+and the random-grasp baseline (``baseline``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
-from cablesim.config import Config, check_fields, check_int
+from cablesim.config import Config, check_int, moved_fields
 from cablesim.errors import ConfigError
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.grasp_sampler import GraspSamplerParams
 from cablesim.perception.refine import DEFAULT_REFINE, GrowParams, RefineParams
 from cablesim.perception.segmentation import SegmentationParams
-from cablesim.sim.perturb import PerturbConfig
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import EPISODE_SHORTCUTS, EpisodeConfig
 
 STRATEGIES = ("sampler", "random", "push")
 FLOWS = ("dis", "oracle", "farneback", "raft")
 MERGES = ("dis", "oracle", "none")
 
 
-@dataclass
+#: Shortcut -> the nested field it writes (``ExploreConfig.of``, the command-line flags).
+EXPLORE_SHORTCUTS: Mapping[str, str] = {
+    **{name: f"episode.{path}" for name, path in EPISODE_SHORTCUTS.items()},
+    "hose": "episode.hose",
+    "perturb": "episode.perturb",
+}
+
+#: Fields of the earlier layout (a top-level copy that overwrote the nested one) -> their place.
+MOVED: Mapping[str, str] = {
+    "seed": "episode.scene.seed",
+    "hose": "episode.hose",
+    "width": "episode.scene.camera.width",
+    "height": "episode.scene.camera.height",
+    "perturb": "episode.perturb",
+}
+
+
+def kind_of(strategy: str) -> str:
+    """The interaction kind a strategy runs: ``push`` pokes, the others grasp."""
+    return "push" if strategy == "push" else "grasp"
+
+
+@dataclass(frozen=True)
 class ExploreConfig(Config):
     """An exploration: start segment, then up to ``grasps`` interactions on the same hose.
 
     strategy: ``sampler`` (the thesis policy: grasp sampler on the merged votes),
     ``random`` (baseline: next grasp at a random voted pixel), ``push`` (pokes instead of
-    grasps, next poke from the grasp sampler, motion segmentation by default).
+    grasps, next poke from the grasp sampler, motion segmentation by default); the
+    interaction's ``episode.interaction.kind`` must be the strategy's (``push`` for ``push``,
+    else ``grasp``): setting ``strategy`` through ``of``, ``with_values``, ``--set`` or
+    ``--strategy`` sets both.
     method: ``correlation``, ``segmentation`` or ``ablation``; None = correlation for grasps,
     segmentation for pushes.
     merge: how votes of earlier interactions are carried into the latest target frame:
@@ -44,8 +78,9 @@ class ExploreConfig(Config):
     ablation through the evaluation module), ``none`` (added in place).
     """
 
-    seed: int = 0
-    hose: int | None = None
+    SHORTCUTS = EXPLORE_SHORTCUTS
+    MOVED = {**MOVED, "episode.seed": "episode.scene.seed"}
+
     strategy: str = "sampler"
     grasps: int = 3  # successful interactions wanted
     max_attempts: int = 6  # interactions tried in total (failed ones included)
@@ -58,18 +93,20 @@ class ExploreConfig(Config):
     # colour, CIELAB distance); None: off (the default: it relies on distinctly coloured hoses)
     grow_colour: float | None = None
     random_tries: int = 30  # random baseline: voted pixels tried per proposal
-    width: int | None = None  # image size; None = the scene's camera (640x480)
-    height: int | None = None
-    perturb: PerturbConfig = field(default_factory=PerturbConfig)
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
     sampler: GraspSamplerParams = field(default_factory=GraspSamplerParams)
     correlation: CorrelationParams = field(default_factory=CorrelationParams)
     segmentation: SegmentationParams = field(default_factory=SegmentationParams)
-    progress: bool = True
+    progress: bool = True  # print progress lines
+
+    @property
+    def seed(self) -> int:
+        """The exploration's seed: ``episode.scene.seed``."""
+        return self.episode.scene.seed
 
     @property
     def kind(self) -> str:
-        return "push" if self.strategy == "push" else "grasp"
+        return kind_of(self.strategy)
 
     @property
     def resolved_method(self) -> str:
@@ -84,32 +121,7 @@ class ExploreConfig(Config):
             return DEFAULT_REFINE
         return dataclasses.replace(DEFAULT_REFINE, grow=GrowParams(colour=self.grow_colour))
 
-    def episode_config(self) -> EpisodeConfig:
-        """The simulated session: the scene of ``seed`` at the chosen image size, the
-        interaction of ``strategy`` and the perturbation."""
-        ep = self.episode
-        scene = dataclasses.replace(ep.scene, seed=self.seed)
-        cam = dataclasses.replace(scene.camera)
-        if self.width is not None:
-            cam.width = self.width
-        if self.height is not None:
-            cam.height = self.height
-        scene = dataclasses.replace(scene, camera=cam)
-        interaction = dataclasses.replace(ep.interaction, kind=self.kind)
-        return dataclasses.replace(
-            ep,
-            seed=self.seed,
-            hose=self.hose,
-            scene=scene,
-            interaction=interaction,
-            perturb=self.perturb,
-            progress=False,
-        )
-
-    def validate(self) -> ExploreConfig:
-        check_fields(self)
-        if not isinstance(self.seed, int) or self.seed < 0:
-            raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
+    def _validate(self) -> None:
         if self.strategy not in STRATEGIES:
             raise ConfigError("strategy", f"must be one of {STRATEGIES}, got {self.strategy!r}")
         if self.method not in (None, "correlation", "segmentation", "ablation"):
@@ -128,9 +140,37 @@ class ExploreConfig(Config):
             raise ConfigError("grow_colour", f"must be in (0, 255] or None, got {self.grow_colour}")
         check_int("max_attempts", self.max_attempts, 1, 100)
         check_int("random_tries", self.random_tries, 1)
-        for name in ("width", "height"):
-            if getattr(self, name) is not None:
-                check_int(name, getattr(self, name), 16)
-        self.perturb.validate()
-        self.episode_config().validate()
-        return self
+        kind = self.episode.interaction.kind
+        if kind != self.kind:
+            raise ConfigError(
+                "episode.interaction.kind",
+                f"{kind!r} does not fit strategy {self.strategy!r}, which runs {self.kind!r} "
+                "interactions (set both, e.g. ExploreConfig.of(strategy=...) or --strategy)",
+            )
+
+    @classmethod
+    def _implied(cls, changes: dict[str, Any]) -> dict[str, Any]:
+        """Setting ``strategy`` sets the interaction kind it runs (unless that is given)."""
+        if "strategy" in changes and "episode.interaction.kind" not in changes:
+            changes = {**changes, "episode.interaction.kind": kind_of(str(changes["strategy"]))}
+        return changes
+
+    @classmethod
+    def _migrate(cls, data: dict[str, Any], path: str) -> dict[str, Any]:
+        """The earlier layout kept ``seed``, ``hose``, ``width``, ``height`` and ``perturb`` at
+        the top, and they overwrote ``episode``'s own when the run began (as did the
+        strategy's interaction kind and ``progress=False``).  Such a file (its ``episode`` has
+        a ``seed``) reruns as it ran; a file that mixes layouts is refused where the two
+        places disagree (:func:`~cablesim.config.moved_fields`)."""
+        if not any(name in data for name in MOVED):
+            return data
+        episode = data.get("episode")
+        old = isinstance(episode, dict) and "seed" in episode
+        if old:
+            assert isinstance(episode, dict)
+            episode = {k: v for k, v in episode.items() if k not in ("seed", "progress")}
+            interaction = dict(episode.get("interaction", {}))
+            interaction["kind"] = kind_of(str(data.get("strategy", "sampler")))
+            episode["interaction"] = interaction
+            data["episode"] = episode
+        return moved_fields(data, path, MOVED, old_layout=old, null_keeps=("width", "height"))

@@ -1,7 +1,7 @@
 """The exploration policy of the thesis (chapter 6) and two baselines.
 
     from cablesim.policies import ExploreConfig, explore
-    res = explore(ExploreConfig(seed=0, grasps=3), out="runs/demo")
+    res = explore(ExploreConfig.of(seed=0, grasps=3), out="runs/demo")
     print(res.summary())               # precision, recall, F_0.4, IoU per interaction and merged
 
 Loop (strategy ``sampler``): a start segment of the hose of interest (the seeded stand-in for a
@@ -19,7 +19,7 @@ Baselines: ``random`` picks the next grasp at a random voted pixel (the voted pi
 3 cm of it form the segment) instead of asking the sampler; ``push`` pokes the hose (closed
 gripper, pressed and back) and segments by motion segmentation.
 
-Neighbouring hoses can be disturbed on purpose during the actions (``config.perturb``, see
+Neighbouring hoses can be disturbed on purpose during the actions (``config.episode.perturb``, see
 :mod:`cablesim.sim.perturb`).  Ground truth reaches the loop only through the evaluation module
 (:class:`~cablesim.evaluation.Evaluator`: scores, grades of proposals, the explicit ``oracle``
 merge); the start segment comes from the simulated session's picker.  The same loop
@@ -144,7 +144,7 @@ class ExplorationResult:
             "flow": self.config.flow,
             "merge": self.config.merge,
             "merged_votes_threshold": self.config.merged_votes,
-            "perturb": self.config.perturb.enabled,
+            "perturb": self.config.episode.perturb.enabled,
             "interactions": [i.to_dict() for i in self.interactions],
             "successful_interactions": len(self.successes),
             "proposal_grades": dict(sorted(self.proposal_grades.items())),
@@ -169,7 +169,7 @@ class ExplorationResult:
             f"exploration seed {self.config.seed}, hose {self.hose}, "
             f"strategy {self.config.strategy}, method {self.config.resolved_method}, "
             f"flow {self.config.flow}, perturbed neighbours "
-            f"{'on' if self.config.perturb.enabled else 'off'}"
+            f"{'on' if self.config.episode.perturb.enabled else 'off'}"
         ]
         lines.append(
             f"{'#':>2} {'source':>7} {'result':<30} {'P':>6} {'R':>6} {'F0.4':>6} {'IoU':>6}"
@@ -541,7 +541,7 @@ def explore(
 
     from .report import ExplorationWriter
 
-    cfg = (config or ExploreConfig()).validate()
+    cfg = config or ExploreConfig()
     if cfg.flow == "raft":  # the checkpoint is checked before the scene is built
         from cablesim.perception.raft import check_checkpoint_file
 
@@ -549,10 +549,10 @@ def explore(
     say = progress or Progress("explore", cfg.progress)
     t_start = time.perf_counter()
     try:
-        session = SimSession.build(cfg.episode_config())
+        session = SimSession.build(cfg.episode)
     except (SceneError, PhysicsDivergedError) as e:  # a named outcome, written, not raised
         say(f"no start segment: {e.outcome}: {e}")
-        failed = ExplorationResult(cfg, cfg.hose, None, None)  # type: ignore[arg-type]
+        failed = ExplorationResult(cfg, cfg.episode.hose, None, None)  # type: ignore[arg-type]
         failed.start_outcome, failed.stop_reason = e.outcome, f"{e.outcome}: {e}"
         failed.scene_draws = {"turned_down": getattr(e, "resamples", [])}
         failed.timings["total"] = time.perf_counter() - t_start

@@ -36,8 +36,7 @@ W, H = 640, 480
 
 
 def scene_view(visual: str, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    cfg = SceneConfig(seed=0)
-    cfg.robot.visual = visual
+    cfg = SceneConfig(seed=0).with_values({"robot.visual": visual})
     world = World.build(cfg)
     world.data.qpos[joint_qpos_addresses(world.model, world.panda.joints)] = q
     mujoco.mj_forward(world.model, world.data)
@@ -50,9 +49,7 @@ def close_up(
     q: np.ndarray, lookat: tuple[float, float, float], distance: float, azimuth: float
 ) -> np.ndarray:
     """The meshed arm (scene without hoses) from a free camera, collision geoms overlaid."""
-    cfg = SceneConfig(seed=0)
-    cfg.robot.visual = "mesh"
-    cfg.hoses.count = 1
+    cfg = SceneConfig(seed=0).with_values({"robot.visual": "mesh", "hoses.count": 1})
     world = World.build(cfg, settle=False)
     m, d = world.model, world.data
     d.qpos[joint_qpos_addresses(m, world.panda.joints)] = q

@@ -19,29 +19,32 @@ from cablesim.perception.tuning import threshold_counts, tune_thresholds
 
 def test_config_refuses_overlapping_splits_and_unknown_settings():
     with pytest.raises(ConfigError, match="overlap"):
-        ThesisConfig(validation=(0, 10), test=(5, 20)).validate()
+        ThesisConfig(validation=(0, 10), test=(5, 20))
     with pytest.raises(ConfigError, match="overlap"):
-        ThesisConfig(clip_validation=(0, 10), clip_test=(9, 20)).validate()
+        ThesisConfig(clip_validation=(0, 10), clip_test=(9, 20))
     with pytest.raises(ConfigError, match="flow"):
-        ThesisConfig(flows=("magic",)).validate()
+        ThesisConfig(flows=("magic",))
     with pytest.raises(ConfigError, match="action_thresholds"):
-        ThesisConfig(action_thresholds=(3,)).validate()
+        ThesisConfig(action_thresholds=(3,))
     with pytest.raises(ConfigError, match="validation"):
-        ThesisConfig(validation=(5, 5)).validate()
+        ThesisConfig(validation=(5, 5))
     with pytest.raises(ConfigError, match="explore_flow"):
-        ThesisConfig(flows=("oracle",), explore_flow="dis").validate()
+        ThesisConfig(flows=("oracle",), explore_flow="dis")
+    with pytest.raises(ConfigError) as err:
+        ThesisConfig().with_values({"scene.width": 0})
+    assert err.value.field == "scene.width"
     assert main(["benchmark", "thesis", "--validation", "0:10", "--test", "5:20"]) == 2
 
 
 def test_jobs_cover_every_scene_and_setting_once():
-    cfg = ThesisConfig(validation=(10, 13), test=(20, 25)).validate()
+    cfg = ThesisConfig(validation=(10, 13), test=(20, 25))
     jobs = cfg.interaction_jobs()
     assert len(jobs) == (3 + 5) * 2 and len({j.key for j in jobs}) == len(jobs)
     assert {j.params["split"] for j in jobs if j.params["seed"] < 20} == {"validation"}
     # a changed setting is a new job (its result file is not reused); the same one is not
     other = ThesisConfig(validation=(10, 13), test=(20, 25), scene=SceneSize(width=320))
-    assert not {j.key for j in jobs} & {j.key for j in other.validate().interaction_jobs()}
-    fewer = ThesisConfig(validation=(10, 13), test=(20, 25), perturb=(True,)).validate()
+    assert not {j.key for j in jobs} & {j.key for j in other.interaction_jobs()}
+    fewer = ThesisConfig(validation=(10, 13), test=(20, 25), perturb=(True,))
     assert {j.key for j in fewer.interaction_jobs()} < {j.key for j in jobs}
     assert len(cfg.exploration_jobs(0.2, 0.8)) == 5
     assert len(cfg.clip_jobs()) == 20 + 50

@@ -12,7 +12,7 @@ from cablesim.cli import main
 from cablesim.config import flatten, override, parse_value
 from cablesim.errors import ConfigError
 from cablesim.policies.config import ExploreConfig
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import EpisodeConfig
 
 
 def _shown(capsys) -> dict[str, object]:
@@ -27,7 +27,7 @@ def test_set_reaches_nested_fields_and_checks_their_type():
     assert cfg.episode.interaction.actions.amplitude == 0.03
     cfg = override(cfg, "episode.scene.camera.position=[1.2, 0.0, 0.9]")
     assert cfg.episode.scene.camera.position == (1.2, 0.0, 0.9)
-    assert override(cfg, "hose=null").hose is None
+    assert override(cfg, "episode.hose=null").episode.hose is None
     assert dict(flatten(cfg))["episode.scene.hoses.count"] == 2
     with pytest.raises(ConfigError, match=r"episode\.scene\.hoses\.count.*integer"):
         override(cfg, "episode.scene.hoses.count=many")
@@ -51,17 +51,17 @@ def test_show_config_prints_every_field_with_flags_and_sets_applied(tmp_path, ca
 
 
 def test_config_file_reruns_and_flags_override_it(tmp_path, capsys):
-    cfg = override(EpisodeConfig(seed=7), "scene.hoses.count=2")
+    cfg = override(EpisodeConfig.of(seed=7), "scene.hoses.count=2")
     path = tmp_path / "config.json"
     path.write_text(json.dumps(cfg.to_dict()))
     assert (
         main(["episode", "--out", str(tmp_path / "o"), "--config", str(path), "--show-config"]) == 0
     )
     shown = _shown(capsys)
-    assert shown["seed"] == 7 and shown["scene.hoses.count"] == 2
+    assert shown["scene.seed"] == 7 and shown["scene.hoses.count"] == 2
     argv = ["episode", "--out", str(tmp_path / "o"), "--config", str(path), "--seed", "9"]
     assert main([*argv, "--show-config"]) == 0
-    assert _shown(capsys)["seed"] == 9
+    assert _shown(capsys)["scene.seed"] == 9
     # a real run's file holds {"explore": ..., "real": ...}: --config takes its explore part
     both = tmp_path / "real.json"
     both.write_text(json.dumps({"explore": ExploreConfig(grasps=2).to_dict(), "real": {}}))

@@ -50,9 +50,9 @@ def test_randomised_scenes_depend_on_the_seed_only():
     assert all(c.light.jitter > 0 and c.camera.position_jitter > 0 for c in many)
     assert base.light.jitter == 0 and base.camera.position_jitter == 0  # base untouched
     with pytest.raises(ConfigError, match="hoses"):
-        Randomization(hoses=(3, 2)).validate()
+        Randomization(hoses=(3, 2))
     with pytest.raises(ConfigError, match="backgrounds"):
-        Randomization(backgrounds=("lava",)).validate()
+        Randomization(backgrounds=("lava",))
 
 
 @pytest.mark.slow

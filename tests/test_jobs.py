@@ -80,9 +80,16 @@ def test_ray_gives_the_local_result_files(tmp_path):
     (``ray.init(num_cpus=2)``) write the files the in-process executor writes."""
     pytest.importorskip("ray")
     from cablesim.benchmark import ThesisConfig
+    from cablesim.benchmark.config import SceneSize
 
-    cfg = ThesisConfig(validation=(11, 12), test=(21, 22), flows=("oracle",), perturb=(True,))
-    cfg.scene.width, cfg.scene.height, cfg.scene.hoses, cfg.scene.periods = 160, 120, 2, 1
+    cfg = ThesisConfig(
+        validation=(11, 12),
+        test=(21, 22),
+        flows=("oracle",),
+        explore_flow="oracle",
+        perturb=(True,),
+        scene=SceneSize(width=160, height=120, hoses=2, periods=1),
+    )
     jobs = cfg.interaction_jobs()
     # the streams are simulated once (local run) and replayed from the cache by Ray's workers
     jobs = [

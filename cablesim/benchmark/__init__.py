@@ -65,7 +65,6 @@ def run_thesis(
     """Run (or resume) the benchmark of ``cfg`` and write its report to ``cfg.out``
     (``retry_failed``: run the jobs whose recorded outcome is a failure again;
     ``report_only``: run nothing, report from the result files there are)."""
-    cfg.validate()
     say = say or Progress("benchmark", progress)
     out = Path(cfg.out)
     results = out / "results"

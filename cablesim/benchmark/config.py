@@ -4,6 +4,9 @@
     print(cfg)                       # JSON; ThesisConfig.from_dict(...) rebuilds it
     cfg.interaction_jobs()           # one job per scene and perturbation setting
 
+The config is checked when it is made (``ConfigError`` naming the field) and frozen
+(``replace`` / ``with_values`` make checked copies).
+
 Scene ranges are seeds ``[A, B)``; validation and test must not overlap (SPEC section 7:
 thresholds are tuned on validation, reported on test).  The defaults are the full protocol
 (``docs/cluster_plan.md`` says what they cost); tests and quick looks shrink the ranges and the
@@ -29,23 +32,26 @@ CLIP_FLOWS = ("farneback-movingcables", "farneback", "dis")
 SPLITS = ("validation", "test")
 
 
-@dataclass
-class SceneSize:
-    """The simulated scene of every job (image size, hoses, action periods)."""
+@dataclass(frozen=True)
+class SceneSize(Config):
+    """The simulated scene of every job (image size, hoses, action periods): what each job's
+    ``EpisodeConfig`` is made of (:func:`cablesim.dataset.generate.scene_from`)."""
+
+    SECTION = "scene"
 
     width: int = 640
     height: int = 480
     hoses: int = 4
     periods: int = 3  # K_p
 
-    def validate(self) -> None:
+    def _validate(self) -> None:
         for name in ("width", "height", "hoses", "periods"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"scene.{name}", f"must be a positive integer, got {v!r}")
 
 
-@dataclass
+@dataclass(frozen=True)
 class ThesisConfig(Config):
     """``cablesim benchmark thesis``: tables 6.4/6.5, 6.8, 6.9 and chapter 5 in simulation."""
 
@@ -76,8 +82,7 @@ class ThesisConfig(Config):
     ray: str | None = None  # None: local processes; "auto", an address, or "local"
     out: str = "runs/thesis"
 
-    def validate(self) -> ThesisConfig:
-        self.scene.validate()
+    def _validate(self) -> None:
         ranges = {
             "validation": self.validation,
             "test": self.test,
@@ -118,7 +123,6 @@ class ThesisConfig(Config):
             raise ConfigError("workers", f"must be a non-negative integer, got {self.workers!r}")
         if not self.clip_taus or any(t <= 0 for t in self.clip_taus):
             raise ConfigError("clip_taus", "need positive motion thresholds")
-        return self
 
     # ------------------------------------------------------------------ jobs
     def seeds(self, split: str) -> range:

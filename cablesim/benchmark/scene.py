@@ -66,14 +66,12 @@ def _code_digest() -> str:
 
 
 def _episode(params: dict[str, Any]) -> Any:
-    from cablesim.sim.perturb import PerturbConfig
-    from cablesim.sim.session import EpisodeConfig
+    from cablesim.sim.config import EpisodeConfig, PerturbConfig
 
-    scene = scene_from(params)
-    cfg = EpisodeConfig(seed=int(params["seed"]), scene=scene)
-    cfg.perturb = PerturbConfig(enabled=bool(params.get("perturb", False)))
-    cfg.interaction.actions.periods = int(params.get("scene", {}).get("periods", 3))
-    return cfg.validate()
+    cfg = EpisodeConfig(
+        scene=scene_from(params), perturb=PerturbConfig(enabled=bool(params.get("perturb", False)))
+    )
+    return cfg.with_values(periods=int(params.get("scene", {}).get("periods", 3)))
 
 
 def simulate_stream(params: dict[str, Any], use_cache: bool = True) -> tuple[Any, dict[str, Any]]:
@@ -191,23 +189,21 @@ def run_exploration(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     from cablesim.perception.correlation import CorrelationParams
     from cablesim.policies.config import ExploreConfig
     from cablesim.policies.explore import explore
-    from cablesim.sim.perturb import PerturbConfig
+    from cablesim.sim.config import PerturbConfig
 
     t0 = time.perf_counter()
     size = params.get("scene", {})
-    cfg = ExploreConfig(
+    shortcuts = {name: int(size[name]) for name in ("width", "height", "hoses") if name in size}
+    cfg = ExploreConfig.of(
         seed=int(params["seed"]),
         grasps=int(params.get("grasps", 2)),
         flow=params.get("flow", "dis"),
-        width=size.get("width"),
-        height=size.get("height"),
         perturb=PerturbConfig(enabled=bool(params.get("perturb", False))),
         correlation=CorrelationParams(c0_min=params["c0_min"], r2_min=params["r2_min"]),
         progress=False,
+        periods=int(size.get("periods", 3)),
+        **shortcuts,
     )
-    if "hoses" in size:
-        cfg.episode.scene.hoses.count = int(size["hoses"])
-    cfg.episode.interaction.actions.periods = int(size.get("periods", 3))
     try:
         res = explore(cfg)
     except CablesimError as e:

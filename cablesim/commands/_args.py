@@ -1,6 +1,12 @@
 """Command-line arguments shared by the subcommands, and the one place that turns them into the
 typed configs (so ``scene``, ``episode`` and ``explore`` read ``--seed --hoses --width ...``
-alike)."""
+alike).
+
+A flag is a shortcut for one field of the command's config: :func:`build_config` starts
+from the default config or ``--config FILE``, writes every flag that was given into its
+field's dotted path (``--width`` -> ``episode.scene.camera.width`` in ``explore``; the tables
+:data:`SCENE_FLAGS` and :data:`EPISODE_FLAGS`) and then every ``--set FIELD=VALUE``, and
+builds the config once, checked (a config that exists is valid)."""
 
 from __future__ import annotations
 
@@ -8,13 +14,37 @@ import argparse
 import json
 import sys
 import tempfile
+import warnings
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
-from cablesim.config import flatten, override
+from cablesim.config import ConfigMigrationWarning, flatten, parse_value, replace_paths
 from cablesim.errors import ConfigError, InputError
 from cablesim.panda.visuals import VISUALS
-from cablesim.sim.config import SceneConfig
+
+T = TypeVar("T")
+
+#: Scene flags (argparse ``dest``) -> the field they write, below a SceneConfig.
+SCENE_FLAGS: Mapping[str, str] = {
+    "seed": "seed",
+    "draw": "draw",
+    "hoses": "hoses.count",
+    "width": "camera.width",
+    "height": "camera.height",
+    "robot_visual": "robot.visual",
+}
+#: Episode flags -> the field they write, below an EpisodeConfig (the scene's under ``scene.``).
+EPISODE_FLAGS: Mapping[str, str] = {
+    **{dest: f"scene.{path}" for dest, path in SCENE_FLAGS.items()},
+    "hose": "hose",
+    "periods": "interaction.actions.periods",
+}
+
+
+def below(prefix: str, flags: Mapping[str, str]) -> dict[str, str]:
+    """``flags`` with every path under ``prefix`` (``below("episode", EPISODE_FLAGS)``)."""
+    return {dest: f"{prefix}.{path}" for dest, path in flags.items()}
 
 
 def output_path(text: str) -> Path:
@@ -44,11 +74,15 @@ def prepare_output_dir(out: Path | str, flag: str = "--out") -> Path:
     return out
 
 
-def check_settle_cache(scene: SceneConfig) -> None:
+def check_settle_cache(cfg: T, scene: str = "") -> T:
     """With the settle cache on, make sure ``$CABLESIM_CACHE`` can be written before the
-    scene settles; if it cannot, warn and settle without the cache (same result, no reuse)."""
-    if not scene.physics.cache:
-        return
+    scene settles; if it cannot, warn and return ``cfg`` with the cache off (its scene at the
+    dotted path ``scene``; same result, no reuse)."""
+    node: Any = cfg
+    for key in filter(None, scene.split(".")):
+        node = getattr(node, key)
+    if not node.physics.cache:
+        return cfg
     from cablesim.sim.settle import cache_dir
 
     where = cache_dir()
@@ -62,7 +96,8 @@ def check_settle_cache(scene: SceneConfig) -> None:
             f"({e.strerror or e}; set CABLESIM_CACHE); settling without it",
             file=sys.stderr,
         )
-        scene.physics.cache = False
+        return replace_paths(cfg, {f"{scene}.physics.cache" if scene else "physics.cache": False})
+    return cfg
 
 
 def add_config_arguments(p: argparse.ArgumentParser) -> None:
@@ -93,7 +128,9 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
 
 def load_config(cls: type, args: argparse.Namespace, section: str | None = None) -> Any:
     """The base config of a command: ``cls()``, or ``--config FILE`` (a config as written by
-    ``to_dict``; a run's file that holds several configs names this one ``section``)."""
+    ``to_dict``; a run's file that holds several configs names this one ``section``).  A file
+    of an earlier cablesim loads with its moved fields in their new place: each move is a
+    warning line on stderr naming the old and the new field."""
     path = getattr(args, "config", None)
     if path is None:
         return cls()
@@ -105,21 +142,56 @@ def load_config(cls: type, args: argparse.Namespace, section: str | None = None)
         raise InputError(f"--config {path}: not JSON ({e})") from e
     if isinstance(data, dict) and section is not None and isinstance(data.get(section), dict):
         data = data[section]
-    try:
-        return cls.from_dict(data)
-    except ConfigError as e:
-        raise InputError(f"--config {path}: {e}") from e
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ConfigMigrationWarning)
+        try:
+            cfg = cls.from_dict(data)
+        except ConfigError as e:
+            raise InputError(f"--config {path}: {e}") from e
+    for w in caught:
+        if issubclass(w.category, ConfigMigrationWarning):
+            print(f"cablesim: warning: --config {path}: {w.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return cfg
 
 
-def finish_config(cfg: Any, args: argparse.Namespace) -> Any:
-    """``cfg`` with every ``--set FIELD=VALUE`` applied (in order), validated."""
+def set_values(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``--set FIELD=VALUE`` assignments (in order; a later one of a field wins)."""
+    out: dict[str, Any] = {}
     for assignment in getattr(args, "set", None) or []:
-        cfg = override(cfg, assignment)
-    return cfg.validate()
+        path, sep, text = assignment.partition("=")
+        if not sep or not path.strip():
+            raise ConfigError("--set", f"expected FIELD=VALUE, got {assignment!r}")
+        out[path.strip()] = parse_value(text.strip())
+    return out
+
+
+def build_config(
+    cls: type[T],
+    args: argparse.Namespace,
+    flags: Mapping[str, str],
+    values: Mapping[str, Any] | None = None,
+    section: str | None = None,
+) -> T:
+    """The command's config: ``cls()`` or ``--config FILE``; then each flag of ``flags``
+    (argparse ``dest`` -> dotted field path) that was given (not None), then ``values``
+    (field path -> value: what other flags mean), then every ``--set``; built once and
+    checked, so the order of the changes does not matter (``--set`` wins over a flag)."""
+    cfg = load_config(cls, args, section)
+    changes = {
+        path: getattr(args, dest)
+        for dest, path in flags.items()
+        if getattr(args, dest, None) is not None
+    }
+    changes.update(values or {})
+    changes.update(set_values(args))
+    return replace_paths(cfg, changes, shortcuts=False) if changes else cfg
 
 
 def show_config(cfg: Any) -> int:
-    """``--show-config``: one ``field = value`` line per field (what ``--set`` takes)."""
+    """``--show-config``: one ``field = value`` line per field, by its full dotted path (what
+    ``--set`` takes); every field once."""
     for path, value in flatten(cfg):
         print(f"{path} = {json.dumps(value)}")
     return 0
@@ -169,41 +241,3 @@ def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed
 def add_interaction_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--periods", type=int, default=None, help="periods per action (K_p, 3)")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
-
-
-def apply_scene_arguments(scene: SceneConfig, args: argparse.Namespace) -> SceneConfig:
-    """``scene`` with the scene arguments that were given (in place; returned)."""
-    if getattr(args, "seed", None) is not None:
-        scene.seed = args.seed
-    if getattr(args, "draw", None) is not None:
-        scene.draw = args.draw
-    if args.hoses is not None:
-        scene.hoses.count = args.hoses
-    if getattr(args, "width", None) is not None:
-        scene.camera.width = args.width
-    if getattr(args, "height", None) is not None:
-        scene.camera.height = args.height
-    if getattr(args, "robot_visual", None) is not None:
-        scene.robot.visual = args.robot_visual
-    return scene
-
-
-def episode_config_from_args(args: argparse.Namespace) -> Any:
-    """The ``EpisodeConfig`` of ``episode`` and ``twin``: ``--config`` or the default, then the
-    seed, hose, scene and interaction flags that were given (not yet ``finish_config``-ed)."""
-    from cablesim.sim.session import EpisodeConfig
-
-    cfg = load_config(EpisodeConfig, args)
-    if getattr(args, "seed", None) is not None:
-        cfg.seed = args.seed
-    if getattr(args, "hose", None) is not None:
-        cfg.hose = args.hose
-    apply_scene_arguments(cfg.scene, args)
-    apply_interaction_arguments(cfg.interaction, args)
-    return cfg
-
-
-def apply_interaction_arguments(interaction: Any, args: argparse.Namespace) -> Any:
-    if getattr(args, "periods", None) is not None:
-        interaction.actions.periods = args.periods
-    return interaction

@@ -19,12 +19,22 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cablesim.commands._args import load_config
+from cablesim.commands._args import add_config_arguments, build_config, show_config
+
+#: the flags that write a field of ThesisConfig as they are
+FLAGS = {
+    "width": "scene.width",
+    "height": "scene.height",
+    "hoses": "scene.hoses",
+    "periods": "scene.periods",
+    "workers": "workers",
+    "ray": "ray",
+}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("which", choices=["thesis"], help="the benchmark to run")
-    p.add_argument("--config", type=Path, help="a ThesisConfig JSON (the flags below override it)")
+    add_config_arguments(p)
     p.add_argument("--validation", help="validation seeds A:B (default 1000:1050)")
     p.add_argument("--test", help="test seeds A:B (default 2000:2200)")
     p.add_argument("--flows", nargs="+", help="flow back ends (default oracle dis)")
@@ -54,38 +64,34 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace):
+    """``ThesisConfig()`` or ``--config FILE``, then the flags given, then ``--set``."""
     from cablesim.benchmark import ThesisConfig
     from cablesim.jobs import parse_range
 
-    cfg = load_config(ThesisConfig, args)
+    values: dict[str, object] = {}
     for name in ("validation", "test", "clip_validation", "clip_test"):
         v = getattr(args, name)
         if v is not None:
-            setattr(cfg, name, parse_range(v, "--" + name.replace("_", "-")))
+            values[name] = parse_range(v, "--" + name.replace("_", "-"))
     if args.flows:
-        cfg.flows = tuple(args.flows)
+        values["flows"] = tuple(args.flows)
     if args.perturb:
-        cfg.perturb = tuple(dict.fromkeys(x == "on" for x in args.perturb))
-    for name in ("width", "height", "hoses", "periods"):
-        if getattr(args, name) is not None:
-            setattr(cfg.scene, name, getattr(args, name))
+        values["perturb"] = tuple(dict.fromkeys(x == "on" for x in args.perturb))
     if args.no_explore:
-        cfg.explore = False
+        values["explore"] = False
     if args.no_clips:
-        cfg.clips = False
-    if args.workers is not None:
-        cfg.workers = args.workers
-    if args.ray is not None:
-        cfg.ray = args.ray
+        values["clips"] = False
     if args.out is not None:
-        cfg.out = str(args.out)
-    return cfg.validate()
+        values["out"] = str(args.out)
+    return build_config(ThesisConfig, args, FLAGS, values)
 
 
 def run(args: argparse.Namespace) -> int:
     from cablesim.benchmark import run_thesis
 
     cfg = config_from_args(args)
+    if args.show_config:
+        return show_config(cfg)
     doc = run_thesis(
         cfg,
         progress=not args.quiet,

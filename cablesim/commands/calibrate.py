@@ -153,15 +153,22 @@ def _base_matrix(base: list[float] | None) -> np.ndarray | None:
 
 
 def _sim_devices(args: argparse.Namespace) -> tuple[Any, Any, Any, np.ndarray, dict]:
-    from cablesim.sim.config import CameraConfig, HoseConfig, RobotConfig, SceneConfig
-    from cablesim.sim.session import EpisodeConfig, SimSession
+    from cablesim.sim.config import (
+        CameraConfig,
+        EpisodeConfig,
+        HoseConfig,
+        RobotConfig,
+        SceneConfig,
+    )
+    from cablesim.sim.session import SimSession
 
     scene = SceneConfig(
+        seed=args.seed,
         camera=CameraConfig(width=args.width, height=args.height),
         hoses=HoseConfig(count=1),
         robot=RobotConfig(hand_board=True),
     )
-    session = SimSession.build(EpisodeConfig(seed=args.seed, scene=scene))
+    session = SimSession.build(EpisodeConfig(scene=scene))
     from cablesim.robot.pose import Pose
 
     base = Pose(*session.world.panda_base).matrix()

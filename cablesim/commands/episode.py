@@ -23,11 +23,11 @@ import json
 import numpy as np
 
 from cablesim.commands._args import (
+    EPISODE_FLAGS,
     add_interaction_arguments,
     add_scene_arguments,
+    build_config,
     check_settle_cache,
-    episode_config_from_args,
-    finish_config,
     output_path,
     prepare_output_dir,
     show_config,
@@ -35,7 +35,7 @@ from cablesim.commands._args import (
 )
 from cablesim.perception.frames import LABEL_ROBOT, Stream
 from cablesim.recording import RecordingWriter
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import EpisodeConfig
 from cablesim.viz import (
     SEGMENT_COLOUR,
     colour_labels,
@@ -57,11 +57,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> EpisodeConfig:
-    cfg = episode_config_from_args(args)
-    cfg.progress = not args.quiet
-    if args.push:
-        cfg.interaction.kind = "push"
-    return finish_config(cfg, args)
+    """``EpisodeConfig()`` or ``--config FILE``, then the flags given, then ``--set``."""
+    values = {"interaction.kind": "push"} if args.push else {}
+    return build_config(EpisodeConfig, args, EPISODE_FLAGS, values)
 
 
 def contact_sheet(
@@ -94,11 +92,13 @@ def run(args: argparse.Namespace) -> int:
         return show_config(cfg)
     out = prepare_output_dir(args.out)
     RecordingWriter.check_target(out / "recording", args.overwrite, "--overwrite")
-    check_settle_cache(cfg.scene)
+    cfg = check_settle_cache(cfg, "scene")
     write_config(out, cfg)
-    if cfg.progress:
+    if not args.quiet:
         print(f"[episode] seed {cfg.seed}: config in {out / 'config.json'}")
-    ep = simulate_episode(cfg, record_to=out / "recording", overwrite=args.overwrite)
+    ep = simulate_episode(
+        cfg, record_to=out / "recording", overwrite=args.overwrite, progress=not args.quiet
+    )
     try:
         res = ep.result
         summary = {

@@ -30,14 +30,13 @@ import cv2
 import numpy as np
 
 from cablesim.commands._args import (
+    EPISODE_FLAGS,
     add_grow_colour_argument,
     add_interaction_arguments,
     add_scene_arguments,
-    apply_interaction_arguments,
-    apply_scene_arguments,
+    below,
+    build_config,
     check_settle_cache,
-    finish_config,
-    load_config,
     prepare_output_dir,
     show_config,
     write_config,
@@ -95,21 +94,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+#: explore's flags -> the field each writes (the session's under ``episode.``).
+EXPLORE_FLAGS = {
+    **below("episode", EPISODE_FLAGS),
+    **{name: name for name in ("strategy", "method", "flow", "merge", "grow_colour", "grasps")},
+}
+
+
 def config_from_args(args: argparse.Namespace) -> ExploreConfig:
     """``ExploreConfig()`` or ``--config FILE``, then the flags given, then ``--set``."""
-    cfg = load_config(ExploreConfig, args, "explore")
-    for name in ("seed", "hose", "strategy", "method", "flow", "merge", "grow_colour"):
-        if getattr(args, name) is not None:
-            setattr(cfg, name, getattr(args, name))
+    values: dict[str, object] = {"progress": not args.quiet}
     if args.grasps is not None:
-        cfg.grasps = args.grasps
-        cfg.max_attempts = max(2 * args.grasps, args.grasps + 2)
+        values["max_attempts"] = max(2 * args.grasps, args.grasps + 2)
+    if args.strategy is not None:  # the interaction kind of the strategy (ExploreConfig)
+        values["episode.interaction.kind"] = "push" if args.strategy == "push" else "grasp"
     if args.perturb:
-        cfg.perturb = dataclasses.replace(cfg.perturb, enabled=True)
-    cfg.progress = not args.quiet
-    apply_scene_arguments(cfg.episode.scene, args)
-    apply_interaction_arguments(cfg.episode.interaction, args)
-    return finish_config(cfg, args)
+        values["episode.perturb.enabled"] = True
+    return build_config(ExploreConfig, args, EXPLORE_FLAGS, values, section="explore")
 
 
 def _flow_kwargs(cfg: ExploreConfig, args: argparse.Namespace) -> dict | None:
@@ -133,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
         return run_real(args, cfg, flow_kwargs)
     from cablesim.policies.explore import explore
 
-    check_settle_cache(cfg.episode.scene)
+    cfg = check_settle_cache(cfg, "episode.scene")
     write_config(args.out, cfg)
     record_to = args.out / "recordings" if args.record else None
     res = explore(cfg, out=args.out, flow_kwargs=flow_kwargs, record_to=record_to)
@@ -195,7 +196,7 @@ def real_config(args: argparse.Namespace, cfg: ExploreConfig):
         raise InputError("--robot franky needs --robot-host")
     if args.calibration is None:
         raise InputError("--robot franky needs --calibration FILE (cablesim calibrate)")
-    interaction = cfg.episode_config().interaction
+    interaction = cfg.episode.interaction
     # the frame stream carries the arm's mask (the arm model through the calibrated camera)
     interaction = interaction.replace(
         capture=dataclasses.replace(interaction.capture, arm_masks=True)

@@ -21,11 +21,10 @@ import mujoco
 import numpy as np
 
 from cablesim.commands._args import (
+    SCENE_FLAGS,
     add_scene_arguments,
-    apply_scene_arguments,
+    build_config,
     check_settle_cache,
-    finish_config,
-    load_config,
     output_path,
     prepare_output_dir,
     show_config,
@@ -63,14 +62,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def scene_config(args: argparse.Namespace) -> SceneConfig:
-    cfg = apply_scene_arguments(load_config(SceneConfig, args, "config"), args)
-    if args.background is not None:
-        cfg.board.background = args.background
+    """``SceneConfig()`` or ``--config FILE``, then the flags given, then ``--set``."""
+    values: dict[str, object] = {}
     if args.no_robot:
-        cfg.robot.enabled = False
+        values["robot.enabled"] = False
     if args.depth_noise:
-        cfg.camera.depth_noise = True
-    return finish_config(cfg, args)
+        values["camera.depth_noise"] = True
+    flags = {**SCENE_FLAGS, "background": "board.background"}
+    return build_config(SceneConfig, args, flags, values, section="config")
 
 
 def pull_hose(world, hose_index: int, distance: float, duration: float) -> dict:
@@ -115,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--hose {args.hose} is not one of the {cfg.hoses.count} hoses")
     out = prepare_output_dir(args.out)
     write_config(out, cfg)
-    check_settle_cache(cfg)
+    cfg = check_settle_cache(cfg)
     t0 = time.perf_counter()
     print(
         f"[scene] building seed {cfg.seed}: {cfg.hoses.count} hoses, "

@@ -19,10 +19,10 @@ import json
 from pathlib import Path
 
 from cablesim.commands._args import (
+    EPISODE_FLAGS,
     add_interaction_arguments,
     add_scene_arguments,
-    episode_config_from_args,
-    finish_config,
+    build_config,
     prepare_output_dir,
     show_config,
 )
@@ -39,11 +39,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from cablesim.progress import Progress, quiet
+    from cablesim.sim.config import EpisodeConfig
     from cablesim.twin import FrankaSimServer
     from cablesim.twin.episode import sim_episode, twin_episode
     from cablesim.viz import errors_tile, overlay_votes, panel, write_png
 
-    cfg = finish_config(episode_config_from_args(args), args)
+    cfg = build_config(EpisodeConfig, args, EPISODE_FLAGS)
     if args.show_config:
         return show_config(cfg)
     out: Path = prepare_output_dir(args.out)

@@ -46,15 +46,17 @@ def scene_from(params: dict[str, Any]) -> SceneConfig:
     from cablesim.dataset.randomize import Randomization, randomize_scene
 
     size = params.get("scene", {})
-    base = SceneConfig(seed=int(params["seed"]))
-    base.camera.width = int(size.get("width", base.camera.width))
-    base.camera.height = int(size.get("height", base.camera.height))
+    values: dict[str, Any] = {"seed": int(params["seed"])}
+    for name, path in (("width", "camera.width"), ("height", "camera.height")):
+        if name in size:
+            values[path] = int(size[name])
     if "hoses" in size:
-        base.hoses.count = int(size["hoses"])
+        values["hoses.count"] = int(size["hoses"])
+    base = SceneConfig().with_values(values)
     if params.get("randomize", False):
         r = params["randomize"]
         return randomize_scene(base.seed, base, Randomization(**(r if isinstance(r, dict) else {})))
-    return base.validate()
+    return base
 
 
 def failure(reason: str, outcome: str | None = None, **extra: Any) -> dict[str, Any]:
@@ -88,15 +90,19 @@ def simulate_clip(
 ) -> SimClip | dict[str, Any]:
     """A :class:`SimClip` of ``scene``, or a failure record (named outcome)."""
     from cablesim.formats.movingcables import labels_to_instances
+    from cablesim.sim.config import EpisodeConfig
     from cablesim.sim.flow_gt import gt_flow
     from cablesim.sim.freeze import HoseFreeze
-    from cablesim.sim.session import EpisodeConfig, SimSession
+    from cablesim.sim.session import SimSession
 
-    cfg = EpisodeConfig(seed=seed, scene=scene)
-    cfg.interaction.actions.periods = int(periods)
-    cfg.interaction.actions.directions = tuple(directions)
-    cfg.interaction.capture.min_gripper_step = 0.0  # every frame: a video clip
-    cfg.interaction.retreat.verify = False  # the clip ends with the action: no target frame
+    cfg = EpisodeConfig(scene=scene.replace(seed=seed)).with_values(
+        {
+            "interaction.actions.periods": int(periods),
+            "interaction.actions.directions": tuple(directions),
+            "interaction.capture.min_gripper_step": 0.0,  # every frame: a video clip
+            "interaction.retreat.verify": False,  # the clip ends with the action: no target
+        }
+    )
     session = SimSession.build(cfg)
     try:
         hose = session.draw_hose()
@@ -204,14 +210,18 @@ def run_mcor(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     """Job: one motion-correlation sequence (params: seed, split, root, scene, periods,
     arm_masks)."""
     from cablesim.formats.mcor import write_annotation, write_mcor
-    from cablesim.sim.session import EpisodeConfig, SimSession
+    from cablesim.sim.config import EpisodeConfig
+    from cablesim.sim.session import SimSession
 
     t0 = time.perf_counter()
     seed = int(params["seed"])
     scene = scene_from(params)
-    cfg = EpisodeConfig(seed=seed, scene=scene)
-    cfg.interaction.actions.periods = int(params.get("periods", 3))
-    cfg.interaction.capture.arm_masks = bool(params.get("arm_masks", True))
+    cfg = EpisodeConfig(scene=scene).with_values(
+        {
+            "interaction.actions.periods": int(params.get("periods", 3)),
+            "interaction.capture.arm_masks": bool(params.get("arm_masks", True)),
+        }
+    )
     session = SimSession.build(cfg)
     try:
         try:

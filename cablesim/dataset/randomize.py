@@ -7,18 +7,17 @@ drawn from the seed's ``dataset`` stream (so a scene depends on its seed alone).
 from __future__ import annotations
 
 import colorsys
-import copy
 from dataclasses import dataclass
 
-from cablesim.config import check_positive
+from cablesim.config import Config, check_positive
 from cablesim.errors import ConfigError
 from cablesim.seeding import stream
 from cablesim.sim.config import BACKGROUNDS, SceneConfig
 
 
-@dataclass
-class Randomization:
-    """What :func:`randomize_scene` draws per scene."""
+@dataclass(frozen=True)
+class Randomization(Config):
+    """What :func:`randomize_scene` draws per scene (checked when made)."""
 
     backgrounds: tuple[str, ...] = BACKGROUNDS
     hoses: tuple[int, int] = (2, 6)  # inclusive range of hose counts
@@ -27,7 +26,7 @@ class Randomization:
     camera_position_jitter: float = 0.02  # metres, CameraConfig.position_jitter
     camera_look_at_jitter: float = 0.03
 
-    def validate(self) -> Randomization:
+    def _validate(self) -> None:
         for b in self.backgrounds:
             if b not in BACKGROUNDS:
                 raise ConfigError("backgrounds", f"unknown {b!r}; choose from {BACKGROUNDS}")
@@ -41,21 +40,19 @@ class Randomization:
         check_positive("light_jitter", self.light_jitter, allow_zero=True)
         check_positive("camera_position_jitter", self.camera_position_jitter, allow_zero=True)
         check_positive("camera_look_at_jitter", self.camera_look_at_jitter, allow_zero=True)
-        return self
 
 
 def randomize_scene(seed: int, base: SceneConfig, r: Randomization | None = None) -> SceneConfig:
     """``base`` with the randomised parts of scene ``seed`` (image size, robot and physics
     stay as in ``base``)."""
-    r = (r or Randomization()).validate()
+    r = r or Randomization()
     rng = stream(seed, "dataset")
-    cfg = copy.deepcopy(base)
-    cfg.seed = int(seed)
-    cfg.board.background = r.backgrounds[int(rng.integers(len(r.backgrounds)))]
-    cfg.board.solid_rgb = tuple(float(x) for x in rng.uniform(0.2, 0.85, 3))
-    cfg.hoses.count = int(rng.integers(r.hoses[0], r.hoses[1] + 1))
+    values: dict[str, object] = {"seed": int(seed)}
+    values["board.background"] = r.backgrounds[int(rng.integers(len(r.backgrounds)))]
+    values["board.solid_rgb"] = tuple(float(x) for x in rng.uniform(0.2, 0.85, 3))
+    values["hoses.count"] = int(rng.integers(r.hoses[0], r.hoses[1] + 1))
     if rng.random() < r.random_colours:
-        cfg.hoses.colors = tuple(
+        values["hoses.colors"] = tuple(
             tuple(
                 float(c)
                 for c in colorsys.hsv_to_rgb(
@@ -64,7 +61,7 @@ def randomize_scene(seed: int, base: SceneConfig, r: Randomization | None = None
             )
             for _ in range(8)
         )
-    cfg.light.jitter = float(r.light_jitter)
-    cfg.camera.position_jitter = float(r.camera_position_jitter)
-    cfg.camera.look_at_jitter = float(r.camera_look_at_jitter)
-    return cfg.validate()
+    values["light.jitter"] = float(r.light_jitter)
+    values["camera.position_jitter"] = float(r.camera_position_jitter)
+    values["camera.look_at_jitter"] = float(r.camera_look_at_jitter)
+    return base.with_values(values)

@@ -4,16 +4,19 @@ real robot alike.
     cfg = InteractionConfig()            # grasp, two periodic actions, release, retreat
     print(cfg)                           # JSON
     InteractionConfig.from_dict(cfg.to_dict()) == cfg
+    cfg.with_values({"actions.periods": 2})   # a new, checked config (configs are frozen)
 
-The simulated session's config (:class:`cablesim.sim.session.EpisodeConfig`: seed, scene,
-hose, perturbation) holds one of these; so does a real-robot exploration.
+Every config here is checked when it is made (:class:`cablesim.config.Config`): an impossible
+value is a ``ConfigError`` naming the field.  The simulated session's config
+(:class:`cablesim.sim.config.EpisodeConfig`: scene, hose, perturbation) holds one of these; so
+does a real-robot exploration.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from cablesim.config import Config, check_fields, check_positive, check_vector
+from cablesim.config import Config, check_positive, check_vector
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
 
@@ -23,9 +26,11 @@ KINDS = ("grasp", "push")
 DIRECTION_NAMES = ("along", "across", "normal", "vertical", "horizontal")
 
 
-@dataclass
-class GraspConfig:
+@dataclass(frozen=True)
+class GraspConfig(Config):
     """Pre-grasp, approach along the board normal, close, verify the hold."""
+
+    SECTION = "grasp"
 
     pregrasp_offset: float = 0.08  # m in front of the grasp point, against the approach
     # m further back where the joint motion to the pre-grasp ends (then a straight line), so
@@ -52,8 +57,7 @@ class GraspConfig:
     # one that went wrong 0.34 (its hoses moved up to 0.68 m).
     min_follow_r2: float = 0.9
 
-    def validate(self) -> None:
-        check_fields(self, "grasp.")
+    def _validate(self) -> None:
         for name in (
             "pregrasp_offset",
             "approach_speed",
@@ -77,9 +81,11 @@ class GraspConfig:
             raise ConfigError("grasp.retries", f"must be an integer >= 0, got {self.retries!r}")
 
 
-@dataclass
-class ActionConfig:
+@dataclass(frozen=True)
+class ActionConfig(Config):
     """Periodic actions g1 -> g1+D -> g1 -> g1-D -> g1, ``periods`` times, per direction."""
+
+    SECTION = "actions"
 
     directions: tuple[str, ...] = ("along", "across")
     extra_directions: tuple[tuple[float, float, float], ...] = ()  # world vectors
@@ -91,8 +97,7 @@ class ActionConfig:
     # of it along its direction (a taut hose stopped it; the frames record where it went)
     min_stroke_coverage: float = 0.25
 
-    def validate(self) -> None:
-        check_fields(self, "actions.")
+    def _validate(self) -> None:
         for d in self.directions:
             if d not in DIRECTION_NAMES:
                 raise ConfigError("actions.directions", f"unknown {d!r}; use {DIRECTION_NAMES}")
@@ -113,9 +118,11 @@ class ActionConfig:
             raise ConfigError("actions.periods", f"must be an integer >= 1, got {self.periods!r}")
 
 
-@dataclass
-class CaptureConfig:
+@dataclass(frozen=True)
+class CaptureConfig(Config):
     """Camera triggering on simulated time and the kept-sample rule (SPEC 3.5)."""
+
+    SECTION = "capture"
 
     frame_rate: float = 15.0  # frames per second of simulated time (RealSense rate)
     min_gripper_step: float = 0.001  # delta_g in metres; 0 keeps every frame
@@ -125,8 +132,7 @@ class CaptureConfig:
     arm_masks: bool = False
     arm_mask_margin: int = 3  # pixels the arm mask is dilated by
 
-    def validate(self) -> None:
-        check_fields(self, "capture.")
+    def _validate(self) -> None:
         check_positive("capture.frame_rate", self.frame_rate)
         if isinstance(self.arm_mask_margin, bool) or not isinstance(self.arm_mask_margin, int):
             raise ConfigError(
@@ -136,8 +142,8 @@ class CaptureConfig:
         check_positive("capture.min_gripper_step", self.min_gripper_step, allow_zero=True)
 
 
-@dataclass
-class RetreatConfig:
+@dataclass(frozen=True)
+class RetreatConfig(Config):
     """Release, back off, move to a joint configuration out of view, wait until the hoses are
     still, then take the target frame.
 
@@ -147,6 +153,8 @@ class RetreatConfig:
     of the valid pixels change depth by more than ``still_depth`` for ``still_time`` seconds.
     Either gives up after ``settle_max_time`` seconds with a named outcome.
     """
+
+    SECTION = "retreat"
 
     back_off: float = 0.12  # m pulled back along -approach after release
     # joint configuration out of view; None: the set-up's park configuration (the scene's
@@ -166,9 +174,11 @@ class RetreatConfig:
     def __post_init__(self) -> None:
         if isinstance(self.qpos, list | tuple):  # from JSON: a list
             try:
-                self.qpos = tuple(float(q) for q in self.qpos)
-            except (TypeError, ValueError):  # named by validate()
-                self.qpos = tuple(self.qpos)
+                qpos = tuple(float(q) for q in self.qpos)
+            except (TypeError, ValueError):  # named by the checks
+                qpos = tuple(self.qpos)
+            object.__setattr__(self, "qpos", qpos)
+        super().__post_init__()
 
     def joint_target(self, park: tuple[float, ...] | None = None) -> tuple[float, ...]:
         """The retreat joint configuration: ``qpos``, else ``park``, else ``PARK_QPOS``."""
@@ -176,8 +186,7 @@ class RetreatConfig:
             return tuple(self.qpos)
         return tuple(park) if park is not None else tuple(PARK_QPOS)
 
-    def validate(self) -> None:
-        check_fields(self, "retreat.")
+    def _validate(self) -> None:
         if self.qpos is not None and len(self.qpos) != 7:
             raise ConfigError("retreat.qpos", f"need 7 joint angles, got {len(self.qpos)}")
         check_positive("retreat.back_off", self.back_off, allow_zero=True)
@@ -195,7 +204,7 @@ class RetreatConfig:
         check_positive("retreat.still_depth_fraction", self.still_depth_fraction, allow_zero=True)
 
 
-@dataclass
+@dataclass(frozen=True)
 class InteractionConfig(Config):
     """One interaction: grasp (or push), actions, capture, retreat."""
 
@@ -206,13 +215,7 @@ class InteractionConfig(Config):
     capture: CaptureConfig = field(default_factory=CaptureConfig)
     retreat: RetreatConfig = field(default_factory=RetreatConfig)
 
-    def validate(self) -> InteractionConfig:
-        check_fields(self)
+    def _validate(self) -> None:
         if self.kind not in KINDS:
             raise ConfigError("kind", f"must be one of {KINDS}, got {self.kind!r}")
         check_positive("push_depth", self.push_depth)
-        self.grasp.validate()
-        self.actions.validate()
-        self.capture.validate()
-        self.retreat.validate()
-        return self

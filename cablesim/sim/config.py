@@ -1,23 +1,34 @@
-"""Typed, seeded, printable configuration of a simulated task-board scene.
+"""Typed, seeded, printable configuration of a simulated task-board scene and of a simulated
+interaction in it (:class:`EpisodeConfig`).
 
 Frame conventions (world, metres): table top at z = 0, x from the robot towards the board,
 z up.  The board's front face is the plane x = ``board.x``; connectors stick out of it towards
--x.  ``SceneConfig.validate()`` raises ``ConfigError`` naming the first impossible field.
+-x.  Every config is checked when it is made (:class:`cablesim.config.Config`): an impossible
+value is a ``ConfigError`` naming the field; configs are frozen (``replace`` and
+``with_values`` make checked copies).
+
+The seed lives in one place, ``SceneConfig.seed`` (``EpisodeConfig.scene.seed``,
+``ExploreConfig.episode.scene.seed``): it draws the scene and names every random stream of a
+run in it (:mod:`cablesim.seeding`); ``EpisodeConfig.seed`` reads it.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from cablesim.config import (
     Config,
-    check_fields,
     check_number,
     check_positive,
     check_range,
     check_vector,
+    is_int,
+    moved_fields,
 )
+from cablesim.episode.config import InteractionConfig
 from cablesim.errors import ConfigError
 from cablesim.panda.description import JOINT_LIMITS, PARK_QPOS
 from cablesim.panda.visuals import check_visual
@@ -60,9 +71,11 @@ DEFAULT_CONNECTORS: tuple[tuple[float, float], ...] = tuple(
 )
 
 
-@dataclass
-class BoardConfig:
+@dataclass(frozen=True)
+class BoardConfig(Config):
     """The vertical task board with male garden-hose connectors."""
+
+    SECTION = "board"
 
     x: float = 0.62  # front face of the board
     width: float = 0.9  # along y
@@ -73,8 +86,7 @@ class BoardConfig:
     connectors: tuple[tuple[float, float], ...] = DEFAULT_CONNECTORS
     connector_length: float = 0.06  # how far a male connector sticks out of the board
 
-    def validate(self) -> None:
-        check_fields(self, "board.")
+    def _validate(self) -> None:
         if self.background not in BACKGROUNDS:
             raise ConfigError(
                 "board.background",
@@ -101,9 +113,11 @@ class BoardConfig:
                 raise ConfigError(f"board.connectors[{i}]", f"({y}, {z}) is off the board")
 
 
-@dataclass
-class HoseConfig:
+@dataclass(frozen=True)
+class HoseConfig(Config):
     """Ranges from which each hose's properties are drawn (seeded)."""
+
+    SECTION = "hoses"
 
     count: int = 4
     length: tuple[float, float] = (0.6, 1.5)
@@ -132,8 +146,7 @@ class HoseConfig:
     section: str = "circle"
     section_size: tuple[float, float] = (0.0075, 0.0075)
 
-    def validate(self) -> None:
-        check_fields(self, "hoses.")
+    def _validate(self) -> None:
         if not isinstance(self.count, int) or not 1 <= self.count <= 8:
             raise ConfigError("hoses.count", f"1 to 8 hoses are supported, got {self.count!r}")
         check_range("hoses.length", self.length, *HOSE_LENGTH)
@@ -188,8 +201,8 @@ class HoseConfig:
                 )
 
 
-@dataclass
-class RGBSensorConfig:
+@dataclass(frozen=True)
+class RGBSensorConfig(Config):
     """The optional RGB sensor model (``cablesim.sim.sensor.rgb_sensor``): the rendered image
     is taken as the scene radiance; the sensor collects ``full_well * exposure`` electrons at
     white, adds shot (Poisson) and read noise, applies the gain that restores the brightness
@@ -197,13 +210,15 @@ class RGBSensorConfig:
     does, varies the brightness from frame to frame (auto-exposure, mains flicker) and
     quantises to 8 bits."""
 
+    SECTION = "camera.rgb_sensor"
+
     full_well: float = 4000.0  # electrons at white, nominal exposure
     read_noise: float = 4.0  # electrons (std)
     exposure: float = 1.0  # fraction of the nominal light collected; the gain is 1 / exposure
     frame_gain_jitter: float = 0.01  # std of the per-frame brightness factor
     demosaic_sigma: float = 0.6  # px, Gaussian correlation of the noise (0: independent)
 
-    def validate(self) -> None:
+    def _validate(self) -> None:
         check_positive("camera.rgb_sensor.full_well", self.full_well)
         check_positive("camera.rgb_sensor.read_noise", self.read_noise, allow_zero=True)
         check_positive("camera.rgb_sensor.exposure", self.exposure)
@@ -218,14 +233,16 @@ class RGBSensorConfig:
 DEPTH_MODELS = ("gaussian", "stereo")
 
 
-@dataclass
-class StereoDepthConfig:
+@dataclass(frozen=True)
+class StereoDepthConfig(Config):
     """The stereo-like depth model (``cablesim.sim.sensor.stereo_depth``), modelled on an active
     IR stereo camera with block matching (RealSense D4xx): the error lives in disparity
     (sigma_z = z^2 sigma_d / (f b)), it is spatially correlated over the matching window, and at
     depth edges the window's winner spreads the near surface over the far one (fattening) or
     the far one over a thin near object (erosion) by up to ``edge_px`` pixels, in patches
     ``edge_scale_px`` long; some edge pixels return nothing."""
+
+    SECTION = "camera.depth_stereo"
 
     baseline: float = 0.095  # m, the D456's stereo baseline
     disparity_noise: float = 0.08  # px (std), sub-pixel matching error
@@ -237,7 +254,7 @@ class StereoDepthConfig:
     edge_dropout: float = 0.15  # probability that an edge pixel returns nothing
     quantum: float = 0.001  # m, depth unit
 
-    def validate(self) -> None:
+    def _validate(self) -> None:
         check_positive("camera.depth_stereo.baseline", self.baseline)
         check_positive("camera.depth_stereo.disparity_noise", self.disparity_noise, True)
         for name in ("window_px", "edge_px"):
@@ -255,8 +272,8 @@ class StereoDepthConfig:
         check_positive("camera.depth_stereo.quantum", self.quantum, True)
 
 
-@dataclass
-class CameraConfig:
+@dataclass(frozen=True)
+class CameraConfig(Config):
     """A fixed RGB-D camera modelled on an Intel RealSense D456.
 
     The D456 colour sensor sees about 90 x 65 degrees at 1280x800 (16:10); its 4:3 modes crop
@@ -264,6 +281,8 @@ class CameraConfig:
     ~408x552 scale runs in real time on a CPU); any size up to 1280x720 works: ``fovy`` is kept,
     the horizontal field follows from the aspect ratio.
     """
+
+    SECTION = "camera"
 
     width: int = 640
     height: int = 480
@@ -301,8 +320,7 @@ class CameraConfig:
         of every result with estimated flow."""
         return cls(**{"rgb_noise": True, "depth_noise": True, "depth_model": "stereo", **changes})  # type: ignore[arg-type]
 
-    def validate(self) -> None:
-        check_fields(self, "camera.")
+    def _validate(self) -> None:
         if not (16 <= self.width <= 1280 and 16 <= self.height <= 720):
             raise ConfigError(
                 "camera.width/height",
@@ -322,8 +340,6 @@ class CameraConfig:
                 raise ConfigError(
                     f"camera.{name}", f"must be true or false, got {getattr(self, name)!r}"
                 )
-        self.depth_stereo.validate()
-        self.rgb_sensor.validate()
         if not 0 < self.near < self.far:
             raise ConfigError("camera.near", "need 0 < near < far")
         pos = check_vector("camera.position", self.position, 3, WORLD_LIMIT)
@@ -363,9 +379,11 @@ def check_view(field: str, position: tuple[float, ...], look_at: tuple[float, ..
         )
 
 
-@dataclass
-class RobotConfig:
+@dataclass(frozen=True)
+class RobotConfig(Config):
     """Where the Panda stands on the table (its base must stay out of the camera's view)."""
+
+    SECTION = "robot"
 
     enabled: bool = True
     base_position: tuple[float, float, float] = (0.22, -0.62, 0.0)
@@ -383,8 +401,7 @@ class RobotConfig:
     # pose, so "mesh" adds a static robot strip to every frame (~950 px at 640x480)
     visual: str = "primitive"
 
-    def validate(self) -> None:
-        check_fields(self, "robot.")
+    def _validate(self) -> None:
         if len(self.base_position) != 3:
             raise ConfigError("robot.base_position", "expected (x, y, z)")
         check_vector("robot.base_position", self.base_position, 3, WORLD_LIMIT)
@@ -399,20 +416,21 @@ class RobotConfig:
         check_visual(self.visual, "robot.visual")
 
 
-@dataclass
-class LightConfig:
+@dataclass(frozen=True)
+class LightConfig(Config):
     """Lighting: the camera's headlight and a directional key light.  ``jitter`` > 0 draws,
     from the seed's ``lighting`` stream, a brightness factor in [1 - jitter, 1 + jitter] for
     each light and turns the key light by up to ``jitter`` radians (randomised datasets); 0
     keeps the fixed lighting."""
+
+    SECTION = "light"
 
     ambient: float = 0.35  # headlight
     diffuse: float = 0.35  # headlight
     key: float = 0.55  # directional key light (diffuse)
     jitter: float = 0.0
 
-    def validate(self) -> None:
-        check_fields(self, "light.")
+    def _validate(self) -> None:
         for name in ("ambient", "diffuse", "key"):
             check_positive(f"light.{name}", getattr(self, name), allow_zero=True)
         check_positive("light.jitter", self.jitter, allow_zero=True)
@@ -423,8 +441,8 @@ class LightConfig:
 SOLVERS = ("Newton", "CG")
 
 
-@dataclass
-class PhysicsConfig:
+@dataclass(frozen=True)
+class PhysicsConfig(Config):
     """MuJoCo options of the scene.
 
     ``solver``: Newton converges in one or two iterations per step in most states of this
@@ -435,6 +453,8 @@ class PhysicsConfig:
     unconverged steps.  ``solver`` CG uses CG throughout (robust against the stall, but 2x the
     cost per step and unstable in other states).
     """
+
+    SECTION = "physics"
 
     timestep: float = 0.004
     solver: str = "Newton"  # one of SOLVERS
@@ -460,8 +480,7 @@ class PhysicsConfig:
     rescue_strain: float = 0.2
     rescue_time: float = 0.5
 
-    def validate(self) -> None:
-        check_fields(self, "physics.")
+    def _validate(self) -> None:
         if not 0 < self.timestep <= 0.016:
             raise ConfigError("physics.timestep", f"must be in (0, 0.016] s, got {self.timestep}")
         if self.solver not in SOLVERS:
@@ -483,9 +502,10 @@ class PhysicsConfig:
             )
 
 
-@dataclass
+@dataclass(frozen=True)
 class SceneConfig(Config):
-    """Everything that defines a scene; ``seed`` draws the random parts.
+    """Everything that defines a scene; ``seed`` draws the random parts (and, in a simulated
+    run, names every random stream of the run: it is the run's one seed).
 
     ``draw`` numbers the layout drawn from the seed: 0 is the seed's own (stream ``hoses``),
     k > 0 the k-th re-draw (child k of stream ``scene_resample``), which the simulated session
@@ -501,22 +521,124 @@ class SceneConfig(Config):
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     light: LightConfig = field(default_factory=LightConfig)
 
-    def validate(self) -> SceneConfig:
-        check_fields(self)
+    def _validate(self) -> None:
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
         if isinstance(self.draw, bool) or not isinstance(self.draw, int) or self.draw < 0:
             raise ConfigError("draw", f"must be a non-negative integer, got {self.draw!r}")
-        self.board.validate()
-        self.hoses.validate()
-        self.camera.validate()
-        self.robot.validate()
-        self.physics.validate()
-        self.light.validate()
         if self.hoses.count > len(self.board.connectors):
             raise ConfigError(
                 "hoses.count",
                 f"{self.hoses.count} hoses need at least {self.hoses.count} connectors, "
                 f"the board has {len(self.board.connectors)}",
             )
-        return self
+
+
+@dataclass(frozen=True)
+class PerturbConfig(Config):
+    """Seeded disturbance of the hoses other than the hose of interest, during actions only
+    (:class:`cablesim.sim.perturb.NeighbourPerturbation`)."""
+
+    SECTION = "perturb"
+
+    enabled: bool = False
+    hoses: tuple[int, ...] | None = None  # None: every hose but the hose of interest
+    points: int = 2  # vertex bodies pulled per hose
+    span: tuple[float, float] = (0.3, 0.7)  # where along the hose (fraction of its vertices)
+    amplitude: tuple[float, float] = (0.01, 0.03)  # m, drawn per action and hose
+    period: tuple[float, float] = (2.5, 4.0)  # s: slower than a 1 m hose swings (~1.6 s)
+    stiffness: float = 120.0  # N/m
+    damping: float = 3.0  # N s/m
+    max_force: float = 2.0  # N per vertex
+
+    def __post_init__(self) -> None:
+        # from JSON: lists; anything that is not a sequence of numbers is named by the checks
+        if isinstance(self.hoses, list | tuple):
+            hoses = tuple(int(h) if is_int(h) else h for h in self.hoses)
+            object.__setattr__(self, "hoses", hoses)
+        for name in ("span", "amplitude", "period"):
+            value = getattr(self, name)
+            if not isinstance(value, tuple | str):
+                try:
+                    object.__setattr__(self, name, tuple(value))
+                except TypeError:
+                    pass
+        super().__post_init__()
+
+    def _validate(self) -> None:
+        if not isinstance(self.points, int) or self.points < 1:
+            raise ConfigError("perturb.points", f"must be an integer >= 1, got {self.points!r}")
+        check_range("perturb.span", self.span, 0.0, 1.0)
+        check_range("perturb.amplitude", self.amplitude, 0.0)
+        check_range("perturb.period", self.period, 1e-3)
+        for name in ("stiffness", "max_force"):
+            check_positive(f"perturb.{name}", getattr(self, name))
+        check_positive("perturb.damping", self.damping, allow_zero=True)
+
+
+#: Shortcuts of the simulated run's configs: name -> the dotted path below an EpisodeConfig
+#: (the command-line flags ``--seed``, ``--width``, ... write the same paths).
+EPISODE_SHORTCUTS: Mapping[str, str] = {
+    "seed": "scene.seed",
+    "draw": "scene.draw",
+    "hoses": "scene.hoses.count",
+    "width": "scene.camera.width",
+    "height": "scene.camera.height",
+    "robot_visual": "scene.robot.visual",
+    "periods": "interaction.actions.periods",
+}
+
+
+@dataclass(frozen=True)
+class EpisodeConfig(Config):
+    """A simulated interaction: the scene (whose ``seed`` is the run's one seed: the scene and
+    the ``episode``, ``perturb`` and ``grasp_retry`` streams of :mod:`cablesim.seeding`), the
+    hose of interest, the interaction and the optional perturbation of the other hoses.
+
+    ``EpisodeConfig.of(seed=3, width=160, height=120)`` sets nested fields by their shortcuts
+    (:data:`EPISODE_SHORTCUTS`); ``cfg.seed`` reads ``cfg.scene.seed``."""
+
+    SHORTCUTS = EPISODE_SHORTCUTS
+    MOVED = {"seed": "scene.seed"}
+
+    hose: int | None = None  # None: drawn from the seed's ``episode`` stream
+    scene: SceneConfig = field(default_factory=SceneConfig)
+    interaction: InteractionConfig = field(default_factory=InteractionConfig)
+    perturb: PerturbConfig = field(default_factory=PerturbConfig)
+    # a drawn hose of interest must cross another hose in the image (the thesis's clutter)
+    clutter: bool = True
+    # scene draws tried (see cablesim.sim.session) before a named failure
+    max_draws: int = 8
+
+    @property
+    def seed(self) -> int:
+        """The run's seed: ``scene.seed``."""
+        return self.scene.seed
+
+    def _validate(self) -> None:
+        if isinstance(self.max_draws, bool) or not isinstance(self.max_draws, int):
+            raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
+        if self.max_draws < 1:
+            raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
+        if self.hose is not None and (
+            isinstance(self.hose, bool)
+            or not isinstance(self.hose, int)
+            or not 0 <= self.hose < self.scene.hoses.count
+        ):
+            raise ConfigError("hose", f"{self.hose} is not one of {self.scene.hoses.count} hoses")
+
+    @classmethod
+    def _migrate(cls, data: dict[str, Any], path: str) -> dict[str, Any]:
+        """Earlier layout: ``seed`` beside ``scene`` (the run's seed: the scene's own
+        ``scene.seed`` was replaced by it) and ``progress`` (now an argument of
+        ``simulate_episode`` and the commands' ``--quiet``)."""
+        return moved_fields(
+            data,
+            path,
+            {"seed": "scene.seed"},
+            old_layout=True,
+            dropped={
+                "progress": "print progress with the command (no --quiet) or "
+                "simulate_episode(progress=True)"
+            },
+        )

@@ -28,47 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from cablesim.config import check_fields, check_positive, check_range, is_int
-from cablesim.errors import ConfigError
-
-
-@dataclass
-class PerturbConfig:
-    """Seeded disturbance of the hoses other than the hose of interest, during actions only."""
-
-    enabled: bool = False
-    hoses: tuple[int, ...] | None = None  # None: every hose but the hose of interest
-    points: int = 2  # vertex bodies pulled per hose
-    span: tuple[float, float] = (0.3, 0.7)  # where along the hose (fraction of its vertices)
-    amplitude: tuple[float, float] = (0.01, 0.03)  # m, drawn per action and hose
-    period: tuple[float, float] = (2.5, 4.0)  # s: slower than a 1 m hose swings (~1.6 s)
-    stiffness: float = 120.0  # N/m
-    damping: float = 3.0  # N s/m
-    max_force: float = 2.0  # N per vertex
-
-    def __post_init__(self) -> None:
-        # from JSON: lists; anything that is not a sequence of numbers is named by validate()
-        if isinstance(self.hoses, list | tuple):
-            self.hoses = tuple(int(h) if is_int(h) else h for h in self.hoses)
-        for name in ("span", "amplitude", "period"):
-            value = getattr(self, name)
-            if not isinstance(value, tuple | str):
-                try:
-                    setattr(self, name, tuple(value))
-                except TypeError:
-                    pass
-
-    def validate(self) -> PerturbConfig:
-        check_fields(self, "perturb.")
-        if not isinstance(self.points, int) or self.points < 1:
-            raise ConfigError("perturb.points", f"must be an integer >= 1, got {self.points!r}")
-        check_range("perturb.span", self.span, 0.0, 1.0)
-        check_range("perturb.amplitude", self.amplitude, 0.0)
-        check_range("perturb.period", self.period, 1e-3)
-        for name in ("stiffness", "max_force"):
-            check_positive(f"perturb.{name}", getattr(self, name))
-        check_positive("perturb.damping", self.damping, allow_zero=True)
-        return self
+from cablesim.sim.config import PerturbConfig
 
 
 @dataclass
@@ -90,7 +50,7 @@ class NeighbourPerturbation:
         rng: np.random.Generator | None = None,
         hose_of_interest: int | None = None,
     ) -> None:
-        self.config = (config or PerturbConfig(enabled=True)).validate()
+        self.config = config or PerturbConfig(enabled=True)
         self.rng = rng if rng is not None else np.random.default_rng(0)
         self.hose_of_interest = hose_of_interest
         self.log: list[dict[str, Any]] = []  # one entry per perturbed hose and action

@@ -1,11 +1,11 @@
 """One simulated session: everything an interaction needs, built from one config and one seed.
 
-    session = SimSession.build(EpisodeConfig(seed=3))     # world, robot, camera, clock, truth
+    session = SimSession.build(EpisodeConfig.of(seed=3))  # world, robot, camera, clock, truth
     start = session.pick_start()                           # seeded start segment of a hose
     result = session.interact(start.mask)                  # grasp, two actions, target frame
     session.close()
 
-    out = simulate_episode(EpisodeConfig(seed=3, hose=1), record_to="runs/ep3")   # all of it
+    out = simulate_episode(EpisodeConfig.of(seed=3, hose=1), record_to="runs/ep3")  # all of it
 
 A session holds the world (settled, reset), ``SimPanda``, ``SimCamera``, the simulated clock
 (frames on simulated time; the neighbour perturbation as its action hook), the ground-truth
@@ -51,7 +51,6 @@ segment).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import time
@@ -60,12 +59,10 @@ from pathlib import Path
 from typing import Any
 
 from cablesim.camera.base import CameraImage
-from cablesim.config import Config, check_fields
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.runner import InteractionResult
 from cablesim.episode.session import Session
 from cablesim.errors import (
-    ConfigError,
     NoGraspableSegmentError,
     PhysicsDivergedError,
     SceneError,
@@ -73,48 +70,7 @@ from cablesim.errors import (
 )
 from cablesim.progress import Progress, Say, quiet
 from cablesim.seeding import stream
-from cablesim.sim.config import SceneConfig
-from cablesim.sim.perturb import PerturbConfig
-
-
-@dataclass
-class EpisodeConfig(Config):
-    """A simulated interaction: the seed (scene and episode), the hose of interest, the scene,
-    the interaction and the optional perturbation of the other hoses."""
-
-    seed: int = 0
-    hose: int | None = None  # None: drawn from the seed's ``episode`` stream
-    scene: SceneConfig = field(default_factory=SceneConfig)
-    interaction: InteractionConfig = field(default_factory=InteractionConfig)
-    perturb: PerturbConfig = field(default_factory=PerturbConfig)
-    progress: bool = False  # print progress lines
-    # a drawn hose of interest must cross another hose in the image (the thesis's clutter)
-    clutter: bool = True
-    # scene draws tried (see the module docstring) before a named failure
-    max_draws: int = 8
-
-    def validate(self) -> EpisodeConfig:
-        check_fields(self)
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
-        if isinstance(self.max_draws, bool) or not isinstance(self.max_draws, int):
-            raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
-        if self.max_draws < 1:
-            raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
-        if self.hose is not None and (
-            isinstance(self.hose, bool)
-            or not isinstance(self.hose, int)
-            or not 0 <= self.hose < self.scene.hoses.count
-        ):
-            raise ConfigError("hose", f"{self.hose} is not one of {self.scene.hoses.count} hoses")
-        self.scene_config().validate()
-        self.interaction.validate()
-        self.perturb.validate()
-        return self
-
-    def scene_config(self) -> SceneConfig:
-        """The scene, with ``seed`` as its seed."""
-        return dataclasses.replace(self.scene, seed=self.seed)
+from cablesim.sim.config import EpisodeConfig
 
 
 class SimSession(Session):
@@ -122,7 +78,7 @@ class SimSession(Session):
     session of the same scene (the world is reset to its settled state)."""
 
     def __init__(self, config: EpisodeConfig, world: Any = None, camera: Any = None) -> None:
-        self.cfg = config.validate()
+        self.cfg = config
         t0 = time.perf_counter()
         self.rng = stream(self.cfg.seed, "episode")
         self.retry_rng = stream(self.cfg.seed, "grasp_retry")
@@ -171,7 +127,7 @@ class SimSession(Session):
         last: SceneError | None = None
         reasons: dict[str, int] = {}  # why candidates were turned down, over every draw
         for k in range(cfg.max_draws):
-            scene = dataclasses.replace(cfg.scene_config(), draw=cfg.scene.draw + k)
+            scene = cfg.scene.replace(draw=cfg.scene.draw + k)
             self.draws += 1
             # each draw picks with its own stream: re-running its config repeats its choices
             self.rng = stream(cfg.seed, "episode", *((scene.draw,) if scene.draw else ()))
@@ -191,7 +147,7 @@ class SimSession(Session):
                 self.resamples.append({"draw": scene.draw, "outcome": e.outcome, "reason": str(e)})
                 self.camera.close()
                 continue
-            self.cfg = cfg.replace(scene=dataclasses.replace(cfg.scene, draw=scene.draw))
+            self.cfg = cfg.replace(scene=scene)
             return
         assert last is not None
         why = "; ".join(r["reason"] for r in self.resamples)
@@ -285,10 +241,11 @@ def simulate_episode(
     config: EpisodeConfig,
     record_to: str | os.PathLike[str] | None = None,
     overwrite: bool = False,
+    progress: bool = False,
 ) -> SimulatedEpisode:
     """Build the session of ``config``, pick a start segment of ``config.hose`` (drawn when
     None) and run the interaction.  With ``record_to`` the frames are written to that directory
-    as they come (see :mod:`cablesim.recording`).  A scene no draw of which serves (module
+    as they come (see :mod:`cablesim.recording`); ``progress`` prints progress lines.  A scene no draw of which serves (module
     docstring), or whose physics diverged while settling, comes back as a failed result with
     its named ``outcome`` (``scene_unsettled``, ``no_graspable_segment``, ``diverged``), not as
     an error."""
@@ -296,7 +253,7 @@ def simulate_episode(
 
     if record_to is not None:  # before the scene is built
         RecordingWriter.check_target(record_to, overwrite)
-    say: Say = Progress("episode") if config.progress else quiet
+    say: Say = Progress("episode") if progress else quiet
     try:
         session = SimSession.build(config)
     except (SceneError, PhysicsDivergedError) as e:

@@ -279,7 +279,7 @@ class World:
     # ------------------------------------------------------------------ building
     @classmethod
     def build(cls, cfg: SceneConfig | None = None, settle: bool = True) -> World:
-        cfg = (cfg or SceneConfig()).validate()
+        cfg = cfg or SceneConfig()
         hose_specs = sample_hoses(cfg)
         cam = sample_camera(cfg)
         try:

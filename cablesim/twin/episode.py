@@ -1,9 +1,9 @@
 """One interaction through the whole real path, with a digital twin as the world.
 
     with FrankaSimServer(object_width=0.015, enforce_motion_limits=False):
-        ep = twin_episode(EpisodeConfig(seed=0, ...))          # grasp, two actions, perception
+        ep = twin_episode(EpisodeConfig.of(seed=0, ...))          # grasp, two actions, perception
     print(ep.summary())
-    ref = sim_episode(EpisodeConfig(seed=0, ...))              # the same seed in pure simulation
+    ref = sim_episode(EpisodeConfig.of(seed=0, ...))              # the same seed in pure simulation
 
 :func:`twin_episode` wires the real components together, none of them aware of the twin:
 :class:`~cablesim.robot.franky_panda.FrankyPanda` speaks libfranka's protocol to the server on
@@ -38,7 +38,7 @@ from cablesim.perception.grasp_sampler import GraspSampler, SamplingResult
 from cablesim.perception.metrics import grade_proposal
 from cablesim.perception.pipeline import StreamSegmentation, segment_stream
 from cablesim.progress import Say, quiet
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import EpisodeConfig
 
 #: FrankyPanda settings against franka-sim: its Cartesian tracking lags a few millimetres, and
 #: there is no realtime kernel here (the real robot keeps the adapter's defaults).
@@ -213,7 +213,7 @@ def twin_episode(
     from cablesim.twin.truth import TwinTruth
     from cablesim.twin.world import FrankySource, TwinWorld
 
-    cfg = config.validate()
+    cfg = config
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     twin = TwinWorld(cfg, fps=fps)

@@ -1,6 +1,6 @@
 """The digital twin: a cablesim world that follows a real-protocol robot in real time.
 
-    twin = TwinWorld(EpisodeConfig(seed=0))                   # built, settled, paused
+    twin = TwinWorld(EpisodeConfig.of(seed=0))                   # built, settled, paused
     robot = FrankyPanda(host, twin.T_world_camera, twin.T_world_base,
                         obstacles=twin.obstacles, realtime=False)
     robot.move_joints(twin.park, check=False)     # the robot starts where the twin's arm is
@@ -70,7 +70,8 @@ from cablesim.perception.frames import Intrinsics
 from cablesim.robot.pose import Pose
 from cablesim.seeding import stream
 from cablesim.sim.camera import SimCamera, intrinsics_from_fovy
-from cablesim.sim.session import EpisodeConfig, choose_start
+from cablesim.sim.config import EpisodeConfig
+from cablesim.sim.session import choose_start
 from cablesim.sim.world import World
 from cablesim.twin.replay import KV_OVER_KP, Replay
 from cablesim.twin.sampling import Samplers
@@ -117,7 +118,7 @@ class TwinWorld:
         finger_rest_speed: float = 0.002,
         gripper_speed: tuple[float, float] = (0.05, 0.1),
     ) -> None:
-        self.cfg = config.validate()
+        self.cfg = config
         if not 0 < fps <= 60:
             raise InputError(f"fps must be in (0, 60], got {fps}")
         self.fps = float(fps)
@@ -126,7 +127,7 @@ class TwinWorld:
         self.max_frame_gap = float(max_frame_gap)
         self.nice = int(nice)
         if world is None:
-            world = World.build(self.cfg.scene_config())
+            world = World.build(self.cfg.scene)
         world.reset()
         if world.panda is None or world.panda_base is None:
             raise InputError("the twin needs a scene with the Panda (robot.enabled)")

@@ -26,7 +26,7 @@ from cablesim.envs import (
 )
 from cablesim.errors import ConfigError, InputError
 
-TINY = HoseExploreConfig(scene_seed=2, hoses=2, width=160, height=120, budget=2, periods=1)
+TINY = HoseExploreConfig.of(scene_seed=2, hoses=2, width=160, height=120, budget=2, periods=1)
 
 
 # ---------------------------------------------------------------------- aim
@@ -146,9 +146,13 @@ def test_image_observation_channels() -> None:
 def test_fast_config() -> None:
     cfg = fast_config(budget=1)
     ep = cfg.episode_config(7)
-    assert (cfg.hoses, cfg.width, cfg.height, cfg.periods, cfg.budget) == (2, 160, 120, 1, 1)
+    scene = cfg.episode.scene
+    assert (scene.hoses.count, scene.camera.width, scene.camera.height) == (2, 160, 120)
+    assert (cfg.episode.interaction.actions.periods, cfg.budget, scene.seed) == (1, 1, 2)
+    assert ep.seed == 7 and ep.replace(seed=2) == cfg.episode  # only the episode seed differs
     assert ep.scene.physics.timestep == 0.008 and ep.interaction.actions.directions == ("along",)
     assert ep.interaction.capture.frame_rate == 10.0
+    assert fast_config(scene_seed=5, hoses=3).episode.scene.hoses.count == 3
     with pytest.raises(ConfigError, match="bugdet"):
         fast_config(bugdet=1)
 

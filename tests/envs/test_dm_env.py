@@ -9,7 +9,7 @@ import cablesim  # noqa: F401  (headless GL before mujoco)
 from cablesim.envs import HoseExploreConfig
 from cablesim.envs.dm import DmEnvAdapter
 
-TINY = HoseExploreConfig(scene_seed=2, hoses=2, width=160, height=120, budget=1, periods=1)
+TINY = HoseExploreConfig.of(scene_seed=2, hoses=2, width=160, height=120, budget=1, periods=1)
 
 
 def test_dm_env_adapter_episode():

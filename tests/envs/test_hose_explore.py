@@ -13,7 +13,7 @@ import cablesim  # noqa: F401  (headless GL before mujoco)
 import cablesim.envs  # noqa: F401  (registers the environment)
 from cablesim.envs import ENV_ID, HoseExploreConfig, HoseExploreEnv
 
-TINY = HoseExploreConfig(scene_seed=2, hoses=2, width=160, height=120, budget=2, periods=1)
+TINY = HoseExploreConfig.of(scene_seed=2, hoses=2, width=160, height=120, budget=2, periods=1)
 
 
 def aim_at_segment(obs: dict) -> dict:

@@ -14,45 +14,47 @@ from cablesim.episode.primitives import action_direction, periodic_waypoints
 from cablesim.errors import ConfigError
 from cablesim.robot.pose import Pose
 from cablesim.sim.clock import SimClock
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import EpisodeConfig
 
 
 def test_config_round_trip_and_print():
-    cfg = EpisodeConfig(seed=4, hose=1)
-    cfg.interaction.actions.extra_directions = ((0.0, 0.0, 1.0),)
-    cfg.interaction.retreat.qpos = (-1.9, -0.6, 0.0, -2.3, 0.0, 1.7, 0.78)
-    cfg.perturb.enabled = True
+    cfg = EpisodeConfig.of(seed=4, hose=1).with_values(
+        {
+            "interaction.actions.extra_directions": ((0.0, 0.0, 1.0),),
+            "interaction.retreat.qpos": (-1.9, -0.6, 0.0, -2.3, 0.0, 1.7, 0.78),
+            "perturb.enabled": True,
+        }
+    )
     again = EpisodeConfig.from_dict(json.loads(json.dumps(cfg.to_dict())))
     assert again == cfg
-    assert '"seed": 4' in str(cfg)
-    assert cfg.scene_config().seed == 4
+    assert '"seed": 4' in str(cfg) and str(cfg).count('"seed"') == 1
+    assert cfg.seed == cfg.scene.seed == 4
 
 
 @pytest.mark.parametrize(
     "change, field",
     [
         ({"hose": 9}, "hose"),
-        ({"seed": -1}, "seed"),
+        ({"seed": -1}, "scene.seed"),
     ],
 )
 def test_config_rejects(change, field):
     with pytest.raises(ConfigError, match=field):
-        EpisodeConfig(**change).validate()
+        EpisodeConfig.of(**change)
 
 
-def test_config_rejects_nested():
-    cfg = EpisodeConfig()
-    cfg.interaction.kind = "pull"
-    with pytest.raises(ConfigError, match="kind"):
-        cfg.validate()
-    cfg = EpisodeConfig()
-    cfg.interaction.actions.directions = ("sideways",)
-    with pytest.raises(ConfigError, match="actions.directions"):
-        cfg.validate()
-    cfg = EpisodeConfig()
-    cfg.interaction.actions.periods = 0
-    with pytest.raises(ConfigError, match="actions.periods"):
-        cfg.validate()
+@pytest.mark.parametrize(
+    "path, value, field",
+    [
+        ("interaction.kind", "pull", "interaction.kind"),
+        ("interaction.actions.directions", ("sideways",), "interaction.actions.directions"),
+        ("interaction.actions.periods", 0, "interaction.actions.periods"),
+    ],
+)
+def test_config_rejects_nested(path, value, field):
+    with pytest.raises(ConfigError) as err:
+        EpisodeConfig().with_values({path: value})
+    assert err.value.field == field
 
 
 class FakeWorld:

@@ -13,15 +13,17 @@ from cablesim.camera.replay import ReplayCamera
 from cablesim.perception.actions import subsample_by_gripper
 from cablesim.perception.frames import LABEL_ROBOT, Frame, Stream
 from cablesim.recording import Recording, RecordingWriter
-from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig
-from cablesim.sim.session import EpisodeConfig, SimSession, simulate_episode
+from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
+from cablesim.sim.session import SimSession, simulate_episode
 
 SEED, HOSE, N_HOSES = 2, 1, 3
 
 
 def small_config(**changes) -> EpisodeConfig:
-    scene = SceneConfig(hoses=HoseConfig(count=N_HOSES), camera=CameraConfig(width=160, height=120))
-    return EpisodeConfig(seed=SEED, hose=HOSE, scene=scene, **changes)
+    scene = SceneConfig(
+        seed=SEED, hoses=HoseConfig(count=N_HOSES), camera=CameraConfig(width=160, height=120)
+    )
+    return EpisodeConfig(hose=HOSE, scene=scene, **changes)
 
 
 def assert_identical(a: list[Frame], b: list[Frame]) -> None:

@@ -3,7 +3,6 @@ is out of the default camera's view; a push runs without grasping."""
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
 import mujoco
@@ -14,8 +13,8 @@ from cablesim.episode import primitives as prim
 from cablesim.episode.config import RetreatConfig
 from cablesim.panda import PARK_QPOS
 from cablesim.perception.frames import LABEL_ROBOT
-from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig
-from cablesim.sim.session import EpisodeConfig, SimSession
+from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
+from cablesim.sim.session import SimSession
 
 SEED, N_HOSES = 2, 3
 #: The retract configuration turned away about joint 1: zero robot pixels in the default
@@ -28,12 +27,11 @@ def small_world():
     from cablesim.sim.world import World
 
     cfg = EpisodeConfig(
-        seed=SEED,
         scene=SceneConfig(
-            hoses=HoseConfig(count=N_HOSES), camera=CameraConfig(width=160, height=120)
+            seed=SEED, hoses=HoseConfig(count=N_HOSES), camera=CameraConfig(width=160, height=120)
         ),
     )
-    session = SimSession.build(cfg, world=World.build(cfg.scene_config()))
+    session = SimSession.build(cfg, world=World.build(cfg.scene))
     yield cfg, session.world, session.camera
     session.close()
 
@@ -107,8 +105,7 @@ def test_retreat_configuration_is_out_of_the_default_view(qpos):
 def test_push_episode(scene):
     cfg, session = scene
     seg = session.pick_start(1)
-    push = cfg.interaction.replace(kind="push")
-    push.actions = dataclasses.replace(push.actions, periods=1)
+    push = cfg.interaction.with_values(kind="push", **{"actions.periods": 1})
     res = session.interact(seg.mask, push)
     print(res.summary())
     assert res.success, res.reason
@@ -131,7 +128,7 @@ def test_bad_episode_config_names_the_field(change, field) -> None:
     from cablesim.errors import ConfigError
 
     with pytest.raises(ConfigError) as e:
-        EpisodeConfig(**change).validate()
+        EpisodeConfig(**change)
     assert e.value.field == field
 
 
@@ -147,8 +144,10 @@ def test_bad_episode_config_names_the_field(change, field) -> None:
 def test_bad_episode_section_values_name_the_field(section, name, value) -> None:
     from cablesim.errors import ConfigError
 
-    cfg = EpisodeConfig()
-    setattr(getattr(cfg.interaction, section), name, value)
-    with pytest.raises(ConfigError) as e:
-        cfg.validate()
+    with pytest.raises(ConfigError) as e:  # through the config: its full path
+        EpisodeConfig().with_values({f"interaction.{section}.{name}": value})
+    assert e.value.field == f"interaction.{section}.{name}"
+    part = type(getattr(EpisodeConfig().interaction, section))
+    with pytest.raises(ConfigError) as e:  # the section made on its own: its own name
+        part(**{name: value})
     assert e.value.field == f"{section}.{name}"

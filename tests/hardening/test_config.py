@@ -1,31 +1,25 @@
 """Issue 12, item 2: config validation catches NaN, wrong types, bools as ints and degenerate
-geometry with a ConfigError naming the field, before anything is built."""
+geometry with a ConfigError naming the field, before anything is built (issue 20: when the
+config is made, so an impossible config never exists)."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import FrozenInstanceError
 
 import pytest
 
 from cablesim.config import from_dict
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
-from cablesim.sim.config import SceneConfig
-from cablesim.sim.session import EpisodeConfig
-from cablesim.sim.world import World
+from cablesim.sim.config import CameraConfig, EpisodeConfig, SceneConfig
 
 NAN = float("nan")
 
 
 def scene(**parts) -> SceneConfig:
-    cfg = SceneConfig(seed=1)
-    for path, value in parts.items():
-        obj = cfg
-        *head, last = path.split("__")
-        for name in head:
-            obj = getattr(obj, name)
-        setattr(obj, last, value)
-    return cfg
+    """``SceneConfig(seed=1)`` with nested fields (``camera__width``) replaced."""
+    return SceneConfig(seed=1).with_values({k.replace("__", "."): v for k, v in parts.items()})
 
 
 @pytest.mark.parametrize(
@@ -46,11 +40,26 @@ def scene(**parts) -> SceneConfig:
     ],
 )
 def test_bad_scene_values_are_named_before_building(change, field, shown):
-    cfg = scene(**change)
     with pytest.raises(ConfigError) as err:
-        World.build(cfg, settle=False)
+        scene(**change)
     assert err.value.field == field
     assert shown in str(err.value)
+
+
+def test_a_config_cannot_be_changed_into_an_impossible_one():
+    cfg = SceneConfig(seed=1)
+    with pytest.raises(FrozenInstanceError):
+        cfg.camera.width = -5  # type: ignore[misc]
+    with pytest.raises(ConfigError) as err:
+        cfg.replace(camera=cfg.camera.replace(width=-5))
+    assert err.value.field == "camera.width/height" and "-5" in str(err.value)
+    with pytest.raises(ConfigError) as err:  # made on its own, a section names its fields
+        CameraConfig(fovy=500.0)
+    assert err.value.field == "camera.fovy"
+    with pytest.raises(ConfigError) as err:  # inside a config: by the full path
+        EpisodeConfig().with_values({"scene.camera.fovy": 500.0})
+    assert err.value.field == "scene.camera.fovy"
+    assert cfg.validate() is cfg  # nothing left to check
 
 
 def test_from_dict_checks_types_before_building():
@@ -67,16 +76,14 @@ def test_from_dict_checks_types_before_building():
 
 
 def test_valid_configs_round_trip_unchanged():
-    cfg = EpisodeConfig(seed=3)
-    again = EpisodeConfig.from_dict(cfg.to_dict()).validate()
+    cfg = EpisodeConfig.of(seed=3)
+    again = EpisodeConfig.from_dict(cfg.to_dict())
     assert again == cfg and str(again) == str(cfg)
     s = SceneConfig(seed=4)
-    assert SceneConfig.from_dict(s.to_dict()).validate() == s
+    assert SceneConfig.from_dict(s.to_dict()) == s
 
 
 def test_jitter_that_could_merge_camera_and_target_is_refused():
-    cfg = SceneConfig(seed=1)
-    cfg.camera.look_at = (cfg.camera.position[0] + 0.05, 0.0, cfg.camera.position[2])
-    cfg.camera.position_jitter = 0.02
+    position = CameraConfig().position
     with pytest.raises(ConfigError, match="camera.look_at"):
-        cfg.validate()
+        CameraConfig(look_at=(position[0] + 0.05, 0.0, position[2]), position_jitter=0.02)

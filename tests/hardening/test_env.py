@@ -4,6 +4,7 @@ every action in ``step``; errors are the project's own, naming the key or field.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import FrozenInstanceError
 
 import gymnasium as gym
 import numpy as np
@@ -13,7 +14,7 @@ import cablesim.envs  # noqa: F401  (registers the environment)
 from cablesim.envs import ENV_ID, HoseExploreConfig, HoseExploreEnv
 from cablesim.errors import CablesimError, ConfigError, InputError
 
-TINY = HoseExploreConfig(scene_seed=2, hoses=2, width=160, height=120, budget=2, periods=1)
+TINY = HoseExploreConfig.of(scene_seed=2, hoses=2, width=160, height=120, budget=2, periods=1)
 GOOD = {"primitive": 0, "point": np.array([0.5, 0.5], np.float32), "angle": np.array([0.0])}
 
 
@@ -31,17 +32,17 @@ def env():
         ({"budget": 0}, "budget"),
         ({"flow": "magic"}, "flow"),
         ({"merge": "glue"}, "merge"),
-        ({"hoses": 9}, "hoses.count"),
-        ({"width": 10}, "camera.width/height"),
-        ({"periods": 1.5}, "periods"),
+        ({"hoses": 9}, "episode.scene.hoses.count"),
+        ({"width": 10}, "episode.scene.camera.width/height"),
+        ({"periods": 1.5}, "episode.interaction.actions.periods"),
         ({"segment_length": float("nan")}, "segment_length"),
-        ({"hose": 2}, "hose"),
+        ({"hose": 2}, "episode.hose"),
         ({"randomize_scene": 1}, "randomize_scene"),
     ],
 )
 def test_bad_config_is_refused_at_construction(change, field):
-    with pytest.raises(ConfigError) as err:
-        HoseExploreEnv(dataclasses.replace(TINY, **change))
+    with pytest.raises(ConfigError) as err:  # the config itself, before any environment
+        TINY.replace(**change)
     assert err.value.field == field
 
 
@@ -70,15 +71,22 @@ def test_reset_checks_the_config_and_the_seed(env):
     inner = env.unwrapped
     with pytest.raises(InputError, match="reset seed"):
         inner.reset(seed=-1)
-    inner.config.budget = 0  # changed after construction
+    with pytest.raises(FrozenInstanceError):
+        inner.config.budget = 0  # a config cannot be changed into an impossible one
+    with pytest.raises(ConfigError, match="budget"):
+        inner.config.replace(budget=0)
+    with pytest.raises(ConfigError, match="flow"):
+        inner.config.replace(flow="magic")
+    old = inner.config
     try:
-        with pytest.raises(ConfigError, match="budget"):
+        inner.config = old.with_values(width=320, height=240)  # not the spaces' size
+        with pytest.raises(ConfigError, match=r"episode\.scene\.camera\.width/height"):
             inner.reset(seed=1)
-        inner.config.budget, inner.config.flow = 2, "magic"
-        with pytest.raises(ConfigError, match="flow"):
+        inner.config = {"budget": 2}
+        with pytest.raises(ConfigError, match="HoseExploreConfig"):
             inner.reset(seed=1)
     finally:
-        inner.config.budget, inner.config.flow = 2, "oracle"
+        inner.config = old
 
 
 def test_step_after_close_is_named():

@@ -61,15 +61,21 @@ def test_cli_explore_tiny(tmp_path, capsys):
 
 
 def test_config_roundtrip_and_validation():
-    cfg = ExploreConfig(seed=3, strategy="random", perturb=PerturbConfig(enabled=True, hoses=(1,)))
+    cfg = ExploreConfig.of(
+        seed=3, strategy="random", perturb=PerturbConfig(enabled=True, hoses=(1,))
+    )
     again = ExploreConfig.from_dict(json.loads(json.dumps(cfg.to_dict())))
     assert again == cfg
-    assert cfg.episode_config().seed == 3
-    assert ExploreConfig(strategy="push").resolved_method == "segmentation"
+    assert cfg.seed == cfg.episode.seed == 3 and cfg.episode.perturb.hoses == (1,)
+    push = ExploreConfig.of(strategy="push")  # sets the interaction kind it runs
+    assert push.resolved_method == "segmentation" and push.episode.interaction.kind == "push"
     from cablesim.errors import ConfigError
 
     with pytest.raises(ConfigError, match="strategy"):
-        ExploreConfig(strategy="nope").validate()
+        ExploreConfig(strategy="nope")
+    with pytest.raises(ConfigError) as err:  # strategy and interaction kind must agree
+        ExploreConfig(strategy="push")
+    assert err.value.field == "episode.interaction.kind"
 
 
 def test_warp_votes_follows_flow():

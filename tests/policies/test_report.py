@@ -47,7 +47,7 @@ def _exploration(tmp_path):
         scores=scores_dict(seg.mask(1), truth),
         merged=scores_dict(seg.votes >= 1, truth),
     )
-    cfg = ExploreConfig(seed=0, flow="oracle")
+    cfg = ExploreConfig.of(seed=0, flow="oracle")
     res = ExplorationResult(
         config=cfg, hose=0, start_rgb=target.rgb, start_segment=segment, interactions=[inter]
     )

@@ -38,11 +38,13 @@ def _look_at(position, target) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def session():
-    from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig
-    from cablesim.sim.session import EpisodeConfig, SimSession
+    from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
+    from cablesim.sim.session import SimSession
 
-    scene = SceneConfig(camera=CameraConfig(width=160, height=120), hoses=HoseConfig(count=1))
-    s = SimSession.build(EpisodeConfig(seed=0, scene=scene))
+    scene = SceneConfig(
+        seed=0, camera=CameraConfig(width=160, height=120), hoses=HoseConfig(count=1)
+    )
+    s = SimSession.build(EpisodeConfig(scene=scene))
     yield s
     s.close()
 

@@ -11,12 +11,13 @@ from cablesim.episode.runner import run_interaction
 from cablesim.errors import ConfigError
 from cablesim.robot.dry_run import DryRunRobot
 from cablesim.robot.guard import GuardedRobot, SafetyConfig
-from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig
-from cablesim.sim.session import EpisodeConfig, SimSession
+from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
+from cablesim.sim.session import SimSession
 
 CFG = EpisodeConfig(
-    seed=2,
-    scene=SceneConfig(hoses=HoseConfig(count=3), camera=CameraConfig(width=160, height=120)),
+    scene=SceneConfig(
+        seed=2, hoses=HoseConfig(count=3), camera=CameraConfig(width=160, height=120)
+    ),
 )
 
 

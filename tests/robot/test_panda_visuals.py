@@ -35,7 +35,7 @@ def test_vendored_meshes_and_licence():
 def test_visual_switch_is_validated():
     assert check_visual("mesh") == "mesh"
     with pytest.raises(ConfigError, match="robot.visual"):
-        SceneConfig(robot=RobotConfig(visual="pretty")).validate()
+        SceneConfig(robot=RobotConfig(visual="pretty"))
     with pytest.raises(ConfigError, match="visual"):
         panda_spec(visual="pretty")
 

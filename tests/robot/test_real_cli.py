@@ -16,16 +16,17 @@ import pytest
 
 from cablesim.calibration import FORMAT, VERSION
 from cablesim.cli import main
-from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig
-from cablesim.sim.session import EpisodeConfig, SimSession
+from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
+from cablesim.sim.session import SimSession
 
 pytest.importorskip("franky", reason="franky-control is not installed (the 'real' extra)")
 pytest.importorskip("pyrealsense2", reason="pyrealsense2 is not installed (the 'real' extra)")
 
 CFG = EpisodeConfig(
-    seed=2,
     hose=1,
-    scene=SceneConfig(hoses=HoseConfig(count=3), camera=CameraConfig(width=320, height=240)),
+    scene=SceneConfig(
+        seed=2, hoses=HoseConfig(count=3), camera=CameraConfig(width=320, height=240)
+    ),
 )
 
 

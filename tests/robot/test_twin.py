@@ -23,8 +23,7 @@ pytest.importorskip("franky", reason="franky-control is not installed (the 'real
 pytest.importorskip("pyrealsense2", reason="pyrealsense2 is not installed (the 'real' extra)")
 
 from cablesim.episode.config import ActionConfig, InteractionConfig  # noqa: E402
-from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig  # noqa: E402
-from cablesim.sim.session import EpisodeConfig  # noqa: E402
+from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig  # noqa: E402
 from cablesim.twin import FrankaSimServer, FrankaSimUnavailable  # noqa: E402
 from cablesim.twin.episode import TwinEpisode, twin_episode  # noqa: E402
 
@@ -32,8 +31,7 @@ from cablesim.twin.episode import TwinEpisode, twin_episode  # noqa: E402
 #: the hose (seed 0's remaining hose is out of the arm's reach, seed 1's grasp is spoilt by
 #: franka-sim's drift after a Cartesian motion; see benchmarks/results/twin.md)
 CONFIG = EpisodeConfig(
-    seed=3,
-    scene=SceneConfig(hoses=HoseConfig(count=3), camera=CameraConfig(320, 240)),
+    scene=SceneConfig(seed=3, hoses=HoseConfig(count=3), camera=CameraConfig(320, 240)),
     interaction=InteractionConfig(actions=ActionConfig(periods=1)),
 )
 

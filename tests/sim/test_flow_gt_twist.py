@@ -63,8 +63,12 @@ def ribbon():
         seed=1, hoses=hoses, robot=RobotConfig(enabled=False), camera=CameraConfig(240, 180)
     )
     mid = start_shape(cfg, sample_hoses(cfg)[0])[15]
-    cfg.camera.position = tuple(float(x) for x in mid + np.array([-0.45, 0.0, 0.0]))
-    cfg.camera.look_at = tuple(float(x) for x in mid)
+    cfg = cfg.with_values(
+        {
+            "camera.position": tuple(float(x) for x in mid + np.array([-0.45, 0.0, 0.0])),
+            "camera.look_at": tuple(float(x) for x in mid),
+        }
+    )
     world = World.build(cfg)
     m, d = world.model, world.data
     hose = world.hoses[0]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cablesim.errors import InputError
+from cablesim.errors import ConfigError, InputError
 from cablesim.sim.camera import intrinsics_from_fovy
 from cablesim.sim.config import BoardConfig, CameraConfig, SceneConfig
 from cablesim.sim.regions import board_region, camera_pose
@@ -46,6 +46,10 @@ def test_thesis_geometry_scales_the_region():
 
 
 def test_board_behind_the_camera_is_an_error():
-    cfg = SceneConfig(board=BoardConfig(x=-1.0, connectors=((0.0, 0.5),)))
+    # a board moved behind the camera is refused by the config itself (board.x stays over the
+    # table); a camera moved past the board, looking away from it, is a valid scene
+    with pytest.raises(ConfigError, match="board.x"):
+        BoardConfig(x=-1.0, connectors=((0.0, 0.5),))
+    cfg = SceneConfig(camera=CameraConfig(position=(0.8, 0.0, 0.6), look_at=(2.0, 0.0, 0.5)))
     with pytest.raises(InputError, match="in front"):
         board_region(cfg, _K(cfg.camera))

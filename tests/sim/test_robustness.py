@@ -22,30 +22,37 @@ from cablesim.errors import (
 )
 from cablesim.perception.frames import LABEL_ROBOT
 from cablesim.seeding import stream
-from cablesim.sim.config import CameraConfig, HoseConfig, PhysicsConfig, SceneConfig
+from cablesim.sim.config import (
+    CameraConfig,
+    EpisodeConfig,
+    HoseConfig,
+    PhysicsConfig,
+    SceneConfig,
+)
 from cablesim.sim.layout import crossed_by, crossing_pairs
-from cablesim.sim.session import EpisodeConfig, SimSession, simulate_episode
+from cablesim.sim.session import SimSession, simulate_episode
 
 BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 
 
 def small(seed: int, hoses: int = 2, **changes) -> EpisodeConfig:
-    scene = SceneConfig(hoses=HoseConfig(count=hoses), camera=CameraConfig(width=160, height=120))
-    return EpisodeConfig(seed=seed, scene=scene, **changes)
+    scene = SceneConfig(
+        seed=seed, hoses=HoseConfig(count=hoses), camera=CameraConfig(width=160, height=120)
+    )
+    return EpisodeConfig(scene=scene, **changes)
 
 
 def unsettled(seed: int = 3) -> EpisodeConfig:
     """A scene that will not settle: 0.2 s of simulated time is far too short."""
     cfg = small(seed, max_draws=2)
-    cfg.scene.physics = PhysicsConfig(settle_max_time=0.2)
-    return cfg
+    return cfg.replace(scene=cfg.scene.replace(physics=PhysicsConfig(settle_max_time=0.2)))
 
 
 def ungraspable(seed: int = 3) -> EpisodeConfig:
     """No hose has a graspable segment: +-0.6 m actions reach beyond any arm."""
-    cfg = small(seed, max_draws=2, clutter=False)
-    cfg.interaction.actions.amplitude = 0.6
-    return cfg
+    return small(seed, max_draws=2, clutter=False).with_values(
+        {"interaction.actions.amplitude": 0.6}
+    )
 
 
 @pytest.fixture(autouse=True)
@@ -98,7 +105,7 @@ def test_the_seed_run_records_every_failure_and_goes_on(seeds_bench) -> None:
     rows = [
         seeds_bench.run_seed(3, config=unsettled().to_dict()),
         seeds_bench.run_seed(4, config=ungraspable().to_dict()),
-        seeds_bench.run_seed(5, config=small(5, hose=7).to_dict()),  # an invalid hose index
+        seeds_bench.run_seed(5, config={**small(5).to_dict(), "hose": 7}),  # an invalid hose
     ]
     assert [r["outcome"] for r in rows] == [
         "scene_unsettled",
@@ -141,7 +148,7 @@ def test_explore_writes_a_failed_start_and_does_not_raise(tmp_path) -> None:
     from cablesim.policies import ExploreConfig
     from cablesim.policies.explore import explore
 
-    cfg = ExploreConfig(seed=3, episode=unsettled(3), width=160, height=120)
+    cfg = ExploreConfig.of(seed=3, episode=unsettled(3), width=160, height=120)
     res = explore(cfg, out=tmp_path / "ex")
     assert not res.successes and res.outcome == "scene_unsettled"
     metrics = json.loads((tmp_path / "ex" / "metrics.json").read_text())
@@ -201,7 +208,7 @@ def test_redraw_is_deterministic_and_recorded() -> None:
 def test_redraws_use_their_own_streams() -> None:
     from cablesim.sim.layout import sample_hoses
 
-    scene = small(SEED_REDRAWN).scene_config()
+    scene = small(SEED_REDRAWN).scene
     d0, d1, d2 = (sample_hoses(scene.replace(draw=k)) for k in range(3))
     assert d0 != d1 != d2 and d0 != d2
     assert sample_hoses(scene.replace(draw=1)) == d1
@@ -233,13 +240,12 @@ def test_a_grasp_that_does_not_hold_is_retried_and_counted(ground_truth: bool) -
     path) the fingers close on less than the expected 5 cm.  Either way the runner backs out and
     re-approaches at +-1 cm along the segment (the seed's ``grasp_retry`` stream picks the side)
     before it reports ``grasp_not_held``; the arm leaves the scene clean."""
-    icfg = InteractionConfig()
-    icfg.actions.periods = 1
-    icfg.capture.ground_truth = ground_truth
+    changes = {"actions.periods": 1, "capture.ground_truth": ground_truth}
     if ground_truth:
-        icfg.grasp.hold_tolerance = 1e-9
+        changes["grasp.hold_tolerance"] = 1e-9
     else:
-        icfg.grasp.width, icfg.grasp.epsilon = 0.05, 0.004
+        changes.update({"grasp.width": 0.05, "grasp.epsilon": 0.004})
+    icfg = InteractionConfig().with_values(changes)
     cfg = small(SEED_GRASP, hoses=3, hose=1, interaction=icfg)
     session = SimSession.build(cfg)
     try:
@@ -263,8 +269,7 @@ def test_no_room_for_the_gripper_where_another_hose_passes_in_front() -> None:
     from cablesim.sim.picker import _densify, gripper_obstruction
     from cablesim.sim.world import World
 
-    scene = small(SEED_REDRAWN).scene_config().replace(draw=1)  # its two hoses cross
-    scene.robot.enabled = False
+    scene = small(SEED_REDRAWN).scene.with_values(draw=1, **{"robot.enabled": False})  # they cross
     world = World.build(scene)
     a, b = (_densify(world.hose_vertices(i), 0.005) for i in (0, 1))
     d = np.linalg.norm(a[:, None] - b[None], axis=2)
@@ -299,7 +304,7 @@ def test_draw_on_the_command_line() -> None:
     p = argparse.ArgumentParser()
     episode.add_arguments(p)
     cfg = episode.config_from_args(p.parse_args(["--seed", "210", "--draw", "1", "--out", "x"]))
-    assert cfg.scene_config().draw == 1 and cfg.seed == 210
+    assert cfg.scene.draw == 1 and cfg.seed == cfg.scene.seed == 210
     with pytest.raises(ConfigError, match="draw"):
         episode.config_from_args(p.parse_args(["--draw", "-1", "--out", "x"]))
 
@@ -312,10 +317,9 @@ def test_a_hose_that_slips_during_an_action_is_grasp_not_held() -> None:
     clean; with the check off (``min_follow_r2 = 0``) the same interaction counts as ok."""
     outcomes = {}
     for r2_min in (0.9, 0.0):
-        icfg = InteractionConfig()
-        icfg.actions.periods = 1
-        icfg.grasp.force = 2.0
-        icfg.grasp.min_follow_r2 = r2_min
+        icfg = InteractionConfig().with_values(
+            {"actions.periods": 1, "grasp.force": 2.0, "grasp.min_follow_r2": r2_min}
+        )
         session = SimSession.build(small(4, hoses=3, hose=1, interaction=icfg))
         try:
             r = session.interact(session.pick_start().mask)
@@ -336,10 +340,8 @@ def test_a_hose_that_slips_during_an_action_is_grasp_not_held() -> None:
 def test_min_follow_r2_is_checked() -> None:
     from cablesim.errors import ConfigError
 
-    icfg = InteractionConfig()
-    icfg.grasp.min_follow_r2 = 1.5
     with pytest.raises(ConfigError, match="grasp.min_follow_r2"):
-        icfg.validate()
+        InteractionConfig().with_values({"grasp.min_follow_r2": 1.5})
 
 
 def test_a_hose_stretched_apart_is_a_divergence() -> None:
@@ -370,8 +372,7 @@ def test_a_blow_up_during_the_interaction_is_the_outcome_diverged() -> None:
     exception and not a silently torn scene."""
     from cablesim.sim.perturb import PerturbConfig
 
-    icfg = InteractionConfig()
-    icfg.actions.periods = 1
+    icfg = InteractionConfig().with_values({"actions.periods": 1})
     pert = PerturbConfig(
         enabled=True, max_force=1000.0, stiffness=5e4, amplitude=(0.5, 0.5), period=(0.5, 0.5)
     )
@@ -439,8 +440,8 @@ def test_a_stretched_hose_is_stepped_by_newton_on_a_dense_jacobian() -> None:
         expected = d.qpos.copy()
         m.opt.solver, m.opt.jacobian = solver, jacobian
         world.set_state(state)
-        physics = world.cfg.physics
-        physics.rescue_strain, physics.rescue_time = 1e-4, 5 * m.opt.timestep
+        physics = world.cfg.physics.replace(rescue_strain=1e-4, rescue_time=5 * m.opt.timestep)
+        world.cfg = world.cfg.replace(physics=physics)
         world.step(1)
         assert world.solver_rescues == 1
         np.testing.assert_array_equal(d.qpos, expected)
@@ -453,7 +454,7 @@ def test_a_stretched_hose_is_stepped_by_newton_on_a_dense_jacobian() -> None:
         world.reset()
         assert world.solver_rescues == 0 and int(m.opt.jacobian) == jacobian
         with pytest.raises(ConfigError, match="physics.rescue_strain"):
-            PhysicsConfig(rescue_strain=0.6).validate()
+            PhysicsConfig(rescue_strain=0.6)
     finally:
         session.close()
 
@@ -464,9 +465,7 @@ def test_a_back_out_that_stops_short_of_the_pregrasp_still_leads_to_the_retry() 
     first grasp closes on nothing, and backing out to its pre-grasp stops 4.4 mm short (the
     open hand brushes a hose).  That used to end the interaction (grasp_not_held, no retry);
     the hand is clear of the hose, so the neighbouring point is tried, and it holds."""
-    cfg = EpisodeConfig(seed=6371)
-    cfg.scene.camera = CameraConfig(320, 240)
-    cfg.interaction.actions.periods = 2
+    cfg = EpisodeConfig.of(seed=6371, width=320, height=240, periods=2)
     ep = simulate_episode(cfg)
     try:
         r = ep.result

@@ -23,31 +23,31 @@ def _cfg(**kw) -> SceneConfig:
 
 
 @pytest.mark.parametrize(
-    ("cfg", "field"),
+    ("make", "field"),
     [
-        (SceneConfig(hoses=HoseConfig(length=(-0.5, 1.0))), "hoses.length"),
-        (SceneConfig(hoses=HoseConfig(length=(1.2, 0.8))), "hoses.length"),
-        (SceneConfig(hoses=HoseConfig(count=9)), "hoses.count"),
-        (SceneConfig(hoses=HoseConfig(count=0)), "hoses.count"),
-        (SceneConfig(board=BoardConfig(background="marble")), "board.background"),
+        (lambda: SceneConfig(hoses=HoseConfig(length=(-0.5, 1.0))), "hoses.length"),
+        (lambda: SceneConfig(hoses=HoseConfig(length=(1.2, 0.8))), "hoses.length"),
+        (lambda: SceneConfig(hoses=HoseConfig(count=9)), "hoses.count"),
+        (lambda: SceneConfig(hoses=HoseConfig(count=0)), "hoses.count"),
+        (lambda: SceneConfig(board=BoardConfig(background="marble")), "board.background"),
         (
-            SceneConfig(
+            lambda: SceneConfig(
                 hoses=HoseConfig(count=3), board=BoardConfig(connectors=((0, 0.8), (0.1, 0.8)))
             ),
             "hoses.count",
         ),
-        (SceneConfig(board=BoardConfig(connectors=((2.0, 0.5),))), "board.connectors[0]"),
-        (SceneConfig(camera=CameraConfig(width=1920, height=1080)), "camera.width/height"),
-        (SceneConfig(physics=PhysicsConfig(timestep=0.05)), "physics.timestep"),
-        (SceneConfig(physics=PhysicsConfig(solver="PGS")), "physics.solver"),
-        (SceneConfig(camera=CameraConfig(sphere_stacks=1)), "camera.sphere_stacks"),
-        (SceneConfig(physics=PhysicsConfig(fallback_time=-1.0)), "physics.fallback_time"),
-        (SceneConfig(seed=-1), "seed"),
+        (lambda: SceneConfig(board=BoardConfig(connectors=((2.0, 0.5),))), "board.connectors[0]"),
+        (lambda: SceneConfig(camera=CameraConfig(width=1920, height=1080)), "camera.width/height"),
+        (lambda: SceneConfig(physics=PhysicsConfig(timestep=0.05)), "physics.timestep"),
+        (lambda: SceneConfig(physics=PhysicsConfig(solver="PGS")), "physics.solver"),
+        (lambda: SceneConfig(camera=CameraConfig(sphere_stacks=1)), "camera.sphere_stacks"),
+        (lambda: SceneConfig(physics=PhysicsConfig(fallback_time=-1.0)), "physics.fallback_time"),
+        (lambda: SceneConfig(seed=-1), "seed"),
     ],
 )
-def test_impossible_config_names_the_field(cfg: SceneConfig, field: str) -> None:
-    with pytest.raises(ConfigError) as e:
-        cfg.validate()
+def test_impossible_config_names_the_field(make, field: str) -> None:
+    with pytest.raises(ConfigError) as e:  # when the config is made
+        make()
     assert e.value.field == field
     assert field in str(e.value)
 
@@ -63,7 +63,7 @@ def test_config_round_trips_and_prints() -> None:
 
 @pytest.mark.parametrize("seed", range(6))
 def test_layout_is_seeded_and_within_ranges(seed: int) -> None:
-    cfg = _cfg(seed=seed).validate()
+    cfg = _cfg(seed=seed)
     a, b = sample_hoses(cfg), sample_hoses(cfg)
     assert a == b
     used = [c for s in a for c in s.ends]
@@ -79,7 +79,7 @@ def test_layout_is_seeded_and_within_ranges(seed: int) -> None:
 
 def test_start_shapes_do_not_intersect() -> None:
     for seed in range(5):
-        cfg = _cfg(seed=seed).validate()
+        cfg = _cfg(seed=seed)
         shapes = [start_shape(cfg, s) for s in sample_hoses(cfg)]
         for i in range(len(shapes)):
             for j in range(i + 1, len(shapes)):

@@ -35,11 +35,11 @@ def test_off_by_default():
     t = CameraConfig.thesis()
     assert (t.width, t.height) == (1280, 720)
     with pytest.raises(ConfigError, match="depth_model"):
-        CameraConfig(depth_model="tof").validate()
+        CameraConfig(depth_model="tof")
     with pytest.raises(ConfigError, match="rgb_sensor.exposure"):
-        CameraConfig(rgb_sensor=RGBSensorConfig(exposure=0.0)).validate()
+        CameraConfig(rgb_sensor=RGBSensorConfig(exposure=0.0))
     with pytest.raises(ConfigError, match="depth_stereo.edge_px"):
-        CameraConfig(depth_stereo=StereoDepthConfig(edge_px=-1)).validate()
+        CameraConfig(depth_stereo=StereoDepthConfig(edge_px=-1))
 
 
 def test_rgb_noise_statistics_and_exposure():
@@ -137,11 +137,12 @@ def test_sim_camera_applies_the_models_from_their_streams(noisy_world: World):
     assert np.array_equal(img.depth, want_depth)
     assert not np.array_equal(img.rgb, clean_rgb) and not np.array_equal(again.rgb, img.rgb)
     # a default camera returns the render untouched
-    noisy_world.cfg.camera = CameraConfig(width=160, height=120)
+    noisy_cfg = noisy_world.cfg
+    noisy_world.cfg = noisy_cfg.replace(camera=CameraConfig(width=160, height=120))
     try:
         with SimCamera(noisy_world) as plain:
             r, d = plain._render_rgbd()  # noqa: SLF001
             got = plain.capture()
         assert np.array_equal(got.rgb, r) and np.array_equal(got.depth, d)
     finally:
-        noisy_world.cfg.camera = c
+        noisy_world.cfg = noisy_cfg

@@ -181,8 +181,10 @@ def test_mesh_look_labels_what_is_drawn():
 
     snaps = {}
     for visual in ("primitive", "mesh"):
-        cfg = SceneConfig(seed=0, camera=CameraConfig(width=W, height=H))
-        cfg.robot.visual = visual  # the two looks share one settled state (same physics)
+        # the two looks share one settled state (same physics)
+        cfg = SceneConfig(
+            seed=0, camera=CameraConfig(width=W, height=H), robot=RobotConfig(visual=visual)
+        )
         world = World.build(cfg)
         with SimCamera(world) as cam:
             parked = cam.snapshot()
@@ -247,16 +249,16 @@ def test_layered_rendering_gives_the_pixels_of_a_full_render():
 def test_coarser_sphere_caps_change_almost_no_pixel(world: World):
     """8 stacks per sphere (the default, for speed) instead of MuJoCo's 16: the hoses' capsule
     caps hide inside the neighbouring edges, so only a few pixels at hose ends change."""
-    import dataclasses
 
     with SimCamera(world) as cam:
         coarse = cam.snapshot()
-    world.cfg.camera = dataclasses.replace(world.cfg.camera, sphere_stacks=16)
+    scene = world.cfg
+    world.cfg = scene.replace(camera=scene.camera.replace(sphere_stacks=16))
     try:
         with SimCamera(world) as cam:
             fine = cam.snapshot()
     finally:
-        world.cfg.camera = dataclasses.replace(world.cfg.camera, sphere_stacks=8)
+        world.cfg = scene
     assert world.model.vis.quality.numstacks == 16  # the model's own setting is kept
     labels = coarse.labels != fine.labels
     changed = np.abs(coarse.rgb.astype(int) - fine.rgb.astype(int)).max(-1) > 0

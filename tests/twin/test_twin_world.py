@@ -8,12 +8,11 @@ import pytest
 from cablesim.errors import InputError
 from cablesim.panda.ik import ArmModel
 from cablesim.robot.pose import Pose
-from cablesim.sim.config import CameraConfig, HoseConfig, SceneConfig
-from cablesim.sim.session import EpisodeConfig
+from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
 from cablesim.twin.world import ReplaySource, TwinWorld
 
 CONFIG = EpisodeConfig(
-    seed=0, scene=SceneConfig(hoses=HoseConfig(count=3), camera=CameraConfig(160, 120))
+    scene=SceneConfig(seed=0, hoses=HoseConfig(count=3), camera=CameraConfig(160, 120))
 )
 #: a wrist turn and a small turn of the base joint, away from the board (park is out of view)
 DELTA = np.array([0.15, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5])
