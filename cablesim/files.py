@@ -217,8 +217,12 @@ _HELD: dict[str, list[int]] = {}  # real path of a lock file -> [fd, depth]
 
 
 def _command_line() -> str:
-    argv = [Path(sys.argv[0]).name if sys.argv and sys.argv[0] else "python", *sys.argv[1:]]
-    return shlex.join(argv)
+    """This process's command line, as a person would type it (``cablesim dataset ...``)."""
+    argv0 = sys.argv[0] if sys.argv else ""
+    first = Path(argv0).name or "python"
+    if Path(argv0).parts[-2:] == ("cablesim", "cli.py"):  # python -m cablesim.cli
+        first = "cablesim"
+    return shlex.join([first, *sys.argv[1:]])
 
 
 class OutputLock:

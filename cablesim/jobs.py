@@ -84,7 +84,18 @@ class Job:
 
 
 def echo(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
-    """A trivial runner (tests of the executors): returns its parameters, fails on request."""
+    """A trivial runner (tests of the executors): returns its parameters, fails on request;
+    ``pid_file``: write the worker's process id there first; ``sleep``: then wait that many
+    seconds; ``done_file``: then write that file; ``disk_full``: raise ``DiskFullError`` naming
+    that path."""
+    if params.get("pid_file"):
+        write_text(params["pid_file"], str(os.getpid()))
+    if params.get("sleep"):
+        time.sleep(float(params["sleep"]))
+    if params.get("done_file"):
+        write_text(params["done_file"], "done")
+    if params.get("disk_full"):
+        raise DiskFullError(params["disk_full"], "asked to")
     if params.get("raise"):
         raise InputError(f"asked to fail: {params['raise']}")
     if params.get("fail"):
