@@ -12,8 +12,14 @@ for bit.  Seeds run in independent ``spawn`` worker processes (``--workers``); a
 does not depend on the number of workers or on the order.  ``--cache-dir`` points the settle
 cache (``$CABLESIM_CACHE``) somewhere else, e.g. an empty directory so that the times include
 settling as a new user's first run does.  ``--write`` writes ``benchmarks/results/seeds.md``
-and ``seeds.json``; results are also written after every seed (``--json``), so an interrupted
-run keeps what it had.
+and ``seeds.json``; results are also written after every seed (``--json``, atomically), so an
+interrupted run keeps what it had, and the same command again resumes: the seeds already in
+the ``--json`` file, run at the same commit with the same ``--set``, are kept and not run again
+(``--fresh`` runs them all).  A resumed run's files equal an uninterrupted run's except what
+times the run (:data:`VOLATILE`: the date, load and wall time in ``meta``, each row's
+``wall_s``/``cpu_s``, the CPU totals in ``summary``, and the markdown lines and columns showing
+them).  A second run writing the same file meanwhile is refused (``.<name>.lock`` beside it).
+``--workers 0`` runs the seeds in this process.
 """
 
 from __future__ import annotations
@@ -40,11 +46,52 @@ from _interaction import episode_config  # noqa: E402  (benchmarks/ is on sys.pa
 from _machine import cpu_model, git_commit  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
+#: what differs between two runs of the same seeds (timings, date, load): not compared
+VOLATILE = {
+    "meta": ("date", "load_start", "load_end", "wall_s"),
+    "rows": ("wall_s", "cpu_s"),
+    "summary": ("cpu_s_median", "cpu_s_total"),
+}
 
 
 def _worker_init() -> None:
-    """Workers leave Ctrl-C to the parent, which cancels what is queued and stops them."""
+    """Workers leave Ctrl-C to the parent, which cancels what is queued and stops them, and
+    die with it when it is killed."""
+    from cablesim.jobs import exit_with_parent
+
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    exit_with_parent()
+
+
+def comparable(doc: dict[str, Any]) -> dict[str, Any]:
+    """A ``--json`` document without its :data:`VOLATILE` fields."""
+    out = dict(doc)
+    out["meta"] = {k: v for k, v in doc.get("meta", {}).items() if k not in VOLATILE["meta"]}
+    out["summary"] = {
+        k: v for k, v in doc.get("summary", {}).items() if k not in VOLATILE["summary"]
+    }
+    out["rows"] = [
+        {k: v for k, v in r.items() if k not in VOLATILE["rows"]} for r in doc.get("rows", [])
+    ]
+    return out
+
+
+def previous_rows(path: Path | None, meta: dict[str, Any], seeds: list[int]) -> dict[int, Any]:
+    """The rows of ``seeds`` in an earlier ``--json`` file made at the same commit with the
+    same config changes (an interrupted run, resumed), else none."""
+    if path is None or not path.is_file():
+        return {}
+    try:
+        doc = json.loads(path.read_text())
+        old = doc["meta"]
+        rows = doc["rows"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+    same = ("commit", "config_changes")
+    if any(old.get(k) != meta.get(k) for k in same):
+        return {}
+    wanted = set(seeds)
+    return {r["seed"]: r for r in rows if isinstance(r, dict) and r.get("seed") in wanted}
 
 
 def _cpu() -> float:
@@ -206,6 +253,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--write", action="store_true", help="write benchmarks/results/seeds.md/json")
     ap.add_argument("--md", type=Path, default=None, help="write the markdown table here")
     ap.add_argument(
+        "--fresh", action="store_true", help="run every seed, even those already in --json"
+    )
+    ap.add_argument(
         "--set",
         action="append",
         default=[],
@@ -228,6 +278,39 @@ def main(argv: list[str] | None = None) -> int:
     )
     json_path = args.json or (RESULTS / "seeds.json" if args.write else None)
     md_path = args.md or (RESULTS / "seeds.md" if args.write else None)
+    if args.workers < 0:
+        ap.error(f"--workers must be 0 (this process) or more, got {args.workers}")
+    from cablesim.errors import CablesimError
+    from cablesim.files import OutputLock
+
+    locks = [
+        OutputLock(p.parent, name=f".{p.name}.lock") for p in (json_path, md_path) if p is not None
+    ]
+    try:
+        for lock in locks:  # refused at once while another run writes the same file
+            lock.acquire()
+    except CablesimError as e:
+        for lock in locks:
+            lock.release()
+        print(f"seeds.py: error: {e}", file=sys.stderr)
+        return 2
+    try:
+        return _run(args, seeds, config, json_path, md_path, argv)
+    finally:
+        for lock in locks:
+            lock.release()
+
+
+def _run(
+    args: argparse.Namespace,
+    seeds: list[int],
+    config: dict[str, Any] | None,
+    json_path: Path | None,
+    md_path: Path | None,
+    argv: list[str] | None,
+) -> int:
+    from cablesim.files import write_text
+
     cache = None if args.cache_dir is None else str(args.cache_dir.resolve())
     if cache is not None:
         Path(cache).mkdir(parents=True, exist_ok=True)
@@ -244,6 +327,14 @@ def main(argv: list[str] | None = None) -> int:
     }
     t0 = time.perf_counter()
     rows: dict[int, dict[str, Any]] = {}
+    if not args.fresh:
+        rows.update(previous_rows(json_path, meta, seeds))
+        if rows:
+            print(
+                f"resuming: {len(rows)} of {len(seeds)} seeds already in {json_path} (same "
+                "commit and --set); --fresh runs them again",
+                flush=True,
+            )
 
     def flush() -> None:
         done = [rows[s] for s in seeds if s in rows]
@@ -254,15 +345,35 @@ def main(argv: list[str] | None = None) -> int:
         if json_path is not None:
             json_path.parent.mkdir(parents=True, exist_ok=True)
             doc = {"meta": meta, "summary": summary(done) if done else {}, "rows": done}
-            json_path.write_text(json.dumps(doc, indent=1, default=str) + "\n")
+            write_text(json_path, json.dumps(doc, indent=1, default=str) + "\n")
         if md_path is not None and done:
             md_path.parent.mkdir(parents=True, exist_ok=True)
-            md_path.write_text(markdown(done, meta))
+            write_text(md_path, markdown(done, meta))
+
+    def record(s: int, row: dict[str, Any]) -> None:
+        rows[s] = row
+        print(
+            f"seed {s}: {row['outcome']}"
+            f" (retries {row.get('grasp_retries', 0)}, re-draws {row.get('resamples', 0)},"
+            f" {row['cpu_s']:.0f} s CPU) [{len(rows)}/{len(seeds)}]"
+            + ("" if row.get("success") else f" {_short(row.get('reason', ''), 160)}"),
+            flush=True,
+        )
+        flush()
+
+    todo = [s for s in seeds if s not in rows]
+    if args.workers == 0:  # in this process
+        try:
+            for s in todo:
+                record(s, run_seed(s, cache, config))
+        except KeyboardInterrupt:
+            print("interrupted: writing what finished", flush=True)
+        return _finish(rows, seeds, flush)
 
     ctx = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(max_workers=args.workers, mp_context=ctx, initializer=_worker_init)
     try:  # the pool is shut down below, also on Ctrl-C
-        futures = {pool.submit(run_seed, s, cache, config): s for s in seeds}
+        futures = {pool.submit(run_seed, s, cache, config): s for s in todo}
         for fut in as_completed(futures):
             s = futures[fut]
             try:
@@ -276,21 +387,18 @@ def main(argv: list[str] | None = None) -> int:
                     "wall_s": float("nan"),
                     "cpu_s": float("nan"),
                 }
-            rows[s] = row
-            print(
-                f"seed {s}: {row['outcome']}"
-                f" (retries {row.get('grasp_retries', 0)}, re-draws {row.get('resamples', 0)},"
-                f" {row['cpu_s']:.0f} s CPU) [{len(rows)}/{len(seeds)}]"
-                + ("" if row.get("success") else f" {_short(row.get('reason', ''), 160)}"),
-                flush=True,
-            )
-            flush()
+            record(s, row)
         pool.shutdown()
     except KeyboardInterrupt:
         print("interrupted: stopping the workers, writing what finished", flush=True)
+        procs = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown
         pool.shutdown(wait=False, cancel_futures=True)
-        for proc in list(getattr(pool, "_processes", {}).values()):
+        for proc in procs:
             proc.terminate()
+    return _finish(rows, seeds, flush)
+
+
+def _finish(rows: dict[int, dict[str, Any]], seeds: list[int], flush: Any) -> int:
     flush()
     done = [rows[s] for s in seeds if s in rows]
     s = summary(done) if done else {}

@@ -28,7 +28,43 @@ class UnreachableError(CablesimError, RuntimeError):
 
 
 class RecordingError(CablesimError, IOError):
-    """A recording on disk is truncated, corrupt or of an unknown version."""
+    """A recording on disk is truncated, corrupt or of an unknown version, or a file of one
+    could not be written."""
+
+
+class DiskFullError(RecordingError):
+    """A file could not be written because its file system (or the user's quota) is full
+    (``ENOSPC``, ``EDQUOT``); ``path`` is that file.  What was written before it stays
+    readable: a recording keeps its finished frames, a dataset or benchmark its finished jobs
+    (the unfinished one is redone by the next run)."""
+
+    outcome = "disk_full"
+
+    def __init__(self, path: object, detail: str = ""):
+        self.path = str(path)
+        self.detail = detail
+        super().__init__(
+            f"{self.path}: no space left on device" + (f" ({detail})" if detail else "")
+        )
+
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:  # across worker processes
+        return (type(self), (self.path, self.detail))
+
+
+class OutputBusyError(CablesimError, RuntimeError):
+    """Another process is writing into the same output folder (it holds ``path``, the folder's
+    lock file); the message names the holder's process id and command."""
+
+    def __init__(self, path: object, holder: str = ""):
+        self.path = str(path)
+        self.holder = holder
+        super().__init__(
+            f"{self.path}: the folder is in use by another cablesim process "
+            f"({holder or 'unknown holder'}); wait for it to finish or write somewhere else"
+        )
+
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:
+        return (type(self), (self.path, self.holder))
 
 
 class CalibrationError(CablesimError, ValueError):

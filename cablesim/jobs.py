@@ -14,6 +14,17 @@ bad scene never stops a run.  Each finished job is written at once, atomically, 
 result files of a local and a Ray run are byte for byte the same); jobs whose file exists are
 skipped (resumable).  Aggregates are recomputed from the files (:func:`load_results`).
 
+Interrupted runs lose nothing: a job is finished exactly when its result file exists (written
+last, after every data file the runner wrote), so a run killed at any point and started again
+redoes the unfinished jobs and gives the same result files, byte for byte, as one that never
+stopped.  Runners that write data files write them into a staging folder and move them into
+place when complete (:func:`cablesim.files.staged`), replacing what an unfinished earlier run
+left.  :func:`execute` holds ``out_dir/.lock`` (:class:`cablesim.files.OutputLock`: a second
+process writing there is refused with ``OutputBusyError``), removes the temporary files and the
+cut-off last line of ``timings.jsonl`` that a killed run left, and stops (``DiskFullError``
+naming the file) when the disk is full, without recording the job that hit it.  Worker
+processes die with the process that started them, so a killed run leaves none writing on.
+
 Local runs use a ``ProcessPoolExecutor`` with the ``spawn`` start method (each worker builds
 its own MuJoCo and GL context; ``workers <= 1`` runs in this process).  ``ray`` is ``"auto"``
 (an existing cluster), an address (``ray://host:10001`` or ``host:6379``) or ``"local"`` (a
@@ -27,6 +38,8 @@ from __future__ import annotations
 import importlib
 import json
 import os
+import signal
+import threading
 import time
 import traceback
 from collections import Counter
@@ -35,7 +48,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cablesim.errors import ConfigError, InputError
+from cablesim.errors import ConfigError, DiskFullError, InputError
+from cablesim.files import (
+    OutputLock,
+    append_line,
+    drop_partial_last_line,
+    remove_tmp_files,
+    write_text,
+)
 from cablesim.jsonutil import json_default
 
 #: kind -> "module:function" of the runner (imported in the worker)
@@ -64,7 +84,18 @@ class Job:
 
 
 def echo(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
-    """A trivial runner (tests of the executors): returns its parameters, fails on request."""
+    """A trivial runner (tests of the executors): returns its parameters, fails on request;
+    ``pid_file``: write the worker's process id there first; ``sleep``: then wait that many
+    seconds; ``done_file``: then write that file; ``disk_full``: raise ``DiskFullError`` naming
+    that path."""
+    if params.get("pid_file"):
+        write_text(params["pid_file"], str(os.getpid()))
+    if params.get("sleep"):
+        time.sleep(float(params["sleep"]))
+    if params.get("done_file"):
+        write_text(params["done_file"], "done")
+    if params.get("disk_full"):
+        raise DiskFullError(params["disk_full"], "asked to")
     if params.get("raise"):
         raise InputError(f"asked to fail: {params['raise']}")
     if params.get("fail"):
@@ -90,6 +121,14 @@ def run_job(job: Job, out_dir: str) -> dict[str, Any]:
             "result": out.get("result", {}),
         }
         timings = dict(out.get("timings", {}))
+    except DiskFullError as e:  # not an outcome of the scene: the run stops (``execute``)
+        record = {
+            "status": "failed",
+            "outcome": e.outcome,
+            "result": {"error": str(e), "path": e.path, "detail": e.detail},
+            "stop": True,
+        }
+        timings = {}
     except Exception as e:  # noqa: BLE001 - a failed scene is an outcome, not a crash
         record = {
             "status": "failed",
@@ -115,22 +154,44 @@ def read_result(path: Path) -> dict[str, Any] | None:
     return doc if isinstance(doc, dict) and "status" in doc else None
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def write_result(out_dir: str | Path, record: dict[str, Any]) -> Path:
-    """Write a record returned by :func:`run_job` (timings to ``timings.jsonl``)."""
+    """Write a record returned by :func:`run_job` atomically (timings to ``timings.jsonl``,
+    one line per run of a job: they differ from run to run and are never compared)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rec = {k: v for k, v in record.items() if k != "timings"}
+    rec = {k: v for k, v in record.items() if k not in ("timings", "stop")}
     path = out / f"{record['key']}.json"
-    _write_atomic(path, json.dumps(rec, indent=1, sort_keys=True, default=json_default) + "\n")
-    with open(out / "timings.jsonl", "a") as f:
-        f.write(json.dumps({"key": record["key"], **record.get("timings", {})}) + "\n")
+    write_text(path, json.dumps(rec, indent=1, sort_keys=True, default=json_default) + "\n")
+    append_line(
+        out / "timings.jsonl", json.dumps({"key": record["key"], **record.get("timings", {})})
+    )
     return path
+
+
+def _stop_if_disk_full(record: dict[str, Any]) -> None:
+    if record.get("stop"):
+        r = record["result"]
+        raise DiskFullError(r["path"], r.get("detail", ""))
+
+
+def exit_with_parent() -> None:
+    """In a worker process: end it when the process that started it dies (a killed run must
+    leave no worker behind that goes on writing files).  Linux's ``PR_SET_PDEATHSIG`` where it
+    exists, and a thread that watches the parent's process id everywhere."""
+    parent = os.getppid()
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # pragma: no cover - not Linux
+        pass
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
 @dataclass
@@ -194,24 +255,44 @@ def _local(pending: list[Job], out_dir: str, workers: int, done: Callable) -> No
 
     todo = list(pending)
     while todo:
-        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+        with ProcessPoolExecutor(
+            workers, mp_context=mp.get_context("spawn"), initializer=exit_with_parent
+        ) as pool:
             futures = {pool.submit(run_job, job, out_dir): job for job in todo}
             todo = []
             broken = False
-            for fut in as_completed(futures):
-                job = futures[fut]
-                try:
-                    done(fut.result())
-                except BrokenProcessPool:
-                    # a worker died (out of memory, a crash in native code): the job that
-                    # killed it cannot be told from the ones queued with it; mark the first one
-                    # failed and run the others again in a fresh pool
-                    if not broken:
-                        broken = True
-                        done(_crashed(job))
-                    else:
-                        todo.append(job)
+            try:
+                for fut in as_completed(futures):
+                    job = futures[fut]
+                    try:
+                        rec = fut.result()
+                    except BrokenProcessPool:
+                        # a worker died (out of memory, a crash in native code): the job that
+                        # killed it cannot be told from the ones queued with it; mark the first
+                        # one failed and run the others again in a fresh pool
+                        if not broken:
+                            broken = True
+                            done(_crashed(job))
+                        else:
+                            todo.append(job)
+                        continue
+                    done(rec)
+            except BaseException:  # a full disk, Ctrl-C: stop the workers, record nothing more
+                _stop_pool(pool)
+                raise
         # a pool that broke leaves its unfinished jobs in ``todo``
+
+
+def _stop_pool(pool: Any) -> None:
+    """Cancel what is queued and end the running workers now (their unfinished jobs have no
+    result file, so the next run redoes them)."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    for proc in procs:
+        proc.join(5)
 
 
 def _crashed(job: Job) -> dict[str, Any]:
@@ -264,11 +345,11 @@ def _ray(pending: list[Job], out_dir: str, address: str, workers: int, done: Cal
             ready, waiting = ray.wait(waiting, num_returns=1)
             for ref in ready:
                 try:
-                    done(ray.get(ref))
+                    rec = ray.get(ref)
                 except Exception as e:  # noqa: BLE001 - a lost worker or node
                     rec = _crashed(refs[ref])
                     rec["outcome"] = f"ray_{type(e).__name__}"
-                    done(rec)
+                done(rec)
     finally:
         if started:
             ray.shutdown()
@@ -285,12 +366,29 @@ def execute(
     dry: bool = False,
 ) -> Summary:
     """Run the jobs that have no result file in ``out_dir`` yet (module docstring); with
-    ``dry`` run nothing and only count what is there (``Summary.missing`` jobs have no file)."""
+    ``dry`` run nothing and only count what is there (``Summary.missing`` jobs have no file).
+    ``OutputBusyError`` when another process is running jobs into ``out_dir``."""
     jobs = _check(list(jobs))
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
         raise ConfigError("workers", f"must be a non-negative integer, got {workers!r}")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    with OutputLock(out):
+        if not dry:  # what a killed run left: temporary files, a cut-off timings line
+            remove_tmp_files(out)
+            drop_partial_last_line(out / "timings.jsonl")
+        return _execute(jobs, out, workers, ray, progress, desc, retry_failed, dry)
+
+
+def _execute(
+    jobs: list[Job],
+    out: Path,
+    workers: int,
+    ray: str | None,
+    progress: bool,
+    desc: str,
+    retry_failed: bool,
+    dry: bool,
+) -> Summary:
     t0 = time.perf_counter()
     pending, outcomes, failures = [], Counter(), {}
 
@@ -314,6 +412,7 @@ def execute(
     new_failures = [0]
 
     def done(rec: dict[str, Any]) -> None:
+        _stop_if_disk_full(rec)
         write_result(out, rec)
         count(rec)
         new_failures[0] += rec["status"] != "ok"

@@ -29,11 +29,17 @@ closed (one atomic ``renameat2(RENAME_EXCHANGE)`` where the platform has it), th
 old one; an interruption before the swap leaves the old recording whole (an exception removes
 the partial new one; a killed process leaves it in its hidden directory).  A directory that is
 not a cablesim recording is never overwritten.
+
+A full disk (``ENOSPC``, ``EDQUOT``) while writing raises
+:class:`~cablesim.errors.DiskFullError` naming the file; an index line cut short by it is
+taken back, so the recording stays readable with every frame written before (``meta.json``
+keeps ``complete: false`` when it cannot be rewritten).
 """
 
 from __future__ import annotations
 
 import ctypes
+import errno
 import hashlib
 import io
 import json
@@ -48,7 +54,8 @@ from typing import Any
 
 import numpy as np
 
-from cablesim.errors import InputError, RecordingError
+from cablesim.errors import DiskFullError, InputError, RecordingError
+from cablesim.files import disk_full_error
 from cablesim.jsonutil import json_default
 from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
 
@@ -173,11 +180,13 @@ class RecordingWriter:
             (self.dir / "flow").mkdir(exist_ok=True)
             self._index = open(self.dir / "index.jsonl", "a", encoding="utf-8")  # noqa: SIM115
         except OSError as e:
+            _raise_disk_full(e, self.dir)
             raise RecordingError(f"{self.path}: cannot write a recording there ({e})") from e
         self.meta = dict(meta or {})
         self.intrinsics: Intrinsics | None = None
         self.frames = 0
         self.closed = False
+        self.failed = False  # a write failed (a full disk): no meta.json that says more
         self._write_meta(complete=False)
 
     @staticmethod
@@ -218,12 +227,26 @@ class RecordingWriter:
         try:
             _write_atomic(self.dir / "meta.json", data)
         except OSError as e:
+            self.failed = True
+            _raise_disk_full(e, self.path / "meta.json")
             raise RecordingError(f"{self.path / 'meta.json'}: cannot be written ({e})") from e
 
     def _append_index(self, entry: dict[str, Any]) -> None:
-        self._index.write(json.dumps(entry) + "\n")
-        self._index.flush()
-        os.fsync(self._index.fileno())
+        """One line with one ``write`` past the file's buffer; a line cut short (a full disk)
+        is taken back, so the index never ends in a torn line that later lines follow."""
+        data = (json.dumps(entry) + "\n").encode()
+        fd = self._index.fileno()
+        start = os.fstat(fd).st_size
+        try:
+            if os.write(fd, data) != len(data):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            os.fsync(fd)
+        except OSError:
+            try:
+                os.ftruncate(fd, start)
+            except OSError:
+                pass
+            raise
 
     def _write_file(
         self, kind: str, i: int, arrays: dict[str, np.ndarray], extra: dict[str, Any]
@@ -245,6 +268,8 @@ class RecordingWriter:
                 }
             )
         except OSError as e:
+            self.failed = True
+            _raise_disk_full(e, self.path / rel)
             raise RecordingError(f"{self.path / rel}: cannot be written ({e})") from e
 
     def add_frame(self, index: int, frame: Frame) -> None:
@@ -287,7 +312,14 @@ class RecordingWriter:
         if meta:
             self.meta.update(meta)
         self._index.close()
-        self._write_meta(complete=complete)
+        failed = self.failed
+        try:
+            self._write_meta(complete=complete and not failed)
+        except RecordingError:
+            if not failed:
+                raise
+            # after a failed write (a full disk) the meta.json written before stays: it says
+            # complete: false, and the index lists exactly the frames on disk
         self.closed = True
         if self.replaces:
             try:
@@ -325,6 +357,12 @@ class RecordingWriter:
             self.close(complete=True)
         else:
             self.abort()
+
+
+def _raise_disk_full(e: OSError, path: Path) -> None:
+    err = disk_full_error(e, path)
+    if isinstance(err, DiskFullError):
+        raise err from e
 
 
 def write_stream(stream: Stream, path: str | os.PathLike[str], overwrite: bool = False) -> Path:

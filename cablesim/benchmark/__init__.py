@@ -16,7 +16,10 @@
 
 Every scene is a job (:mod:`cablesim.jobs`): run locally in worker processes or on Ray, one
 result file each, resumable; the report (``report.md``, ``report.json``, plots) is recomputed
-from the files.
+from the files.  A run killed at any point and started again writes the same files as one that
+never stopped, except what records the run itself: ``results/timings.jsonl`` and the date,
+machine and run-time lines of ``report.md`` (``report.json`` holds no time).  ``out/.lock``
+refuses a second run into the same folder while one is going.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from typing import Any
 
 from cablesim.benchmark import report as rp
 from cablesim.benchmark.config import SceneSize, ThesisConfig
+from cablesim.files import OutputLock, write_text
 from cablesim.jobs import Summary, execute, load_results, ray_init, ray_shutdown
 from cablesim.jsonutil import json_default
 from cablesim.progress import Progress, Say
@@ -65,11 +69,22 @@ def run_thesis(
     """Run (or resume) the benchmark of ``cfg`` and write its report to ``cfg.out``
     (``retry_failed``: run the jobs whose recorded outcome is a failure again;
     ``report_only``: run nothing, report from the result files there are)."""
+    with OutputLock(cfg.out):  # refused at once while another run writes there
+        return _run_thesis(cfg, progress, say, retry_failed, report_only)
+
+
+def _run_thesis(
+    cfg: ThesisConfig,
+    progress: bool,
+    say: Say | None,
+    retry_failed: bool,
+    report_only: bool,
+) -> dict[str, Any]:
     say = say or Progress("benchmark", progress)
     out = Path(cfg.out)
     results = out / "results"
     out.mkdir(parents=True, exist_ok=True)
-    (out / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2) + "\n")
+    write_text(out / "config.json", json.dumps(cfg.to_dict(), indent=2) + "\n")
     t0 = time.perf_counter()
     summaries: dict[str, Summary] = {}
     started = ray_init(cfg.ray, cfg.workers) if cfg.ray is not None else False
@@ -143,11 +158,11 @@ def _machine() -> str:
 def write_report(
     cfg: ThesisConfig, doc: dict[str, Any], records: list[dict[str, Any]], out: Path
 ) -> None:
-    """``report.json``, ``report.md`` and the plots."""
+    """``report.json``, ``report.md`` and the plots, each written whole (atomically)."""
     rows = doc["segmentation"]
-    pr = rp.plot_pr_curves(records, rows, out / "pr_curves.png")
-    dist = rp.plot_distributions(rows, out / "distributions.png")
-    taus = rp.plot_clip_taus(doc.get("clips", {}), out / "clip_taus.png")
+    pr = _plot(out / "pr_curves.png", rp.plot_pr_curves, records, rows)
+    dist = _plot(out / "distributions.png", rp.plot_distributions, rows)
+    taus = _plot(out / "clip_taus.png", rp.plot_clip_taus, doc.get("clips", {}))
     sc = cfg.scene
     lines = [
         "# The thesis's tables in simulation (`cablesim benchmark thesis`)",
@@ -192,10 +207,27 @@ def write_report(
         lines += rp.clip_markdown(doc["clips"])
         if taus:
             lines += [f"![motion threshold]({taus.name})", ""]
-    (out / "report.md").write_text("\n".join(lines) + "\n")
-    (out / "report.json").write_text(
-        json.dumps(_no_nan(doc), indent=1, default=json_default) + "\n"
+    write_text(out / "report.md", "\n".join(lines) + "\n")
+    # the run's own wall time is in report.md only, so report.json compares across runs
+    kept = {k: v for k, v in doc.items() if k != "wall_s"}
+    write_text(
+        out / "report.json", json.dumps(_no_nan(kept), indent=1, default=json_default) + "\n"
     )
+
+
+def _plot(path: Path, plot: Any, *args: Any) -> Path | None:
+    """``plot(*args, tmp)`` into a temporary file renamed to ``path``; None (and no stale
+    plot of an earlier run left at ``path``) when there is nothing to plot."""
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        made = plot(*args, tmp)
+        if made is None:
+            path.unlink(missing_ok=True)
+            return None
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
 
 
 def _no_nan(v: Any) -> Any:

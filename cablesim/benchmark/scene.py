@@ -76,26 +76,57 @@ def _episode(params: dict[str, Any]) -> Any:
 
 def simulate_stream(params: dict[str, Any], use_cache: bool = True) -> tuple[Any, dict[str, Any]]:
     """(stream, info) of the job's interaction, from the cache when it was simulated before;
-    (None, failure record) when the interaction failed (a failure is cached too)."""
+    (None, failure record) when the interaction failed (a failure is cached too).
+
+    A cache entry is finished when its ``info.json`` is there (written last, atomically); an
+    entry without one (a killed run) is removed and simulated again.  Two processes that need
+    the same entry at once take turns (``flock`` on the entry's ``.lock``): the second finds it
+    filled."""
     import mujoco
 
-    from cablesim.recording import read_stream, write_stream
-    from cablesim.sim.session import SimSession
+    from cablesim.files import waiting_lock
 
     cfg = _episode(params)
     blob = json.dumps([cfg.to_dict(), mujoco.__version__, _code_digest()], sort_keys=True)
     root = Path(params["stream_cache"]) if params.get("stream_cache") else cache_root()
     folder = root / hashlib.sha256(blob.encode()).hexdigest()[:24]
+    if not use_cache:
+        info, res = _simulate(cfg)
+        return (res.stream if info["status"] == "ok" else None), info
+    cached = _cached(folder)
+    if cached is not None:
+        return cached
+    with waiting_lock(folder / ".lock"):
+        cached = _cached(folder)  # filled by another process meanwhile
+        if cached is not None:
+            return cached
+        info, res = _simulate(cfg)
+        _store(folder, info, res)
+    return (res.stream if info["status"] == "ok" else None), info
+
+
+def _cached(folder: Path) -> tuple[Any, dict[str, Any]] | None:
+    """A finished cache entry's (stream, info), or None (missing or damaged)."""
+    from cablesim.recording import read_stream
+
     info_path = folder / "info.json"
-    if use_cache and info_path.is_file():
-        try:
-            info = json.loads(info_path.read_text())
-            if info.get("status") != "ok":
-                return None, info
-            return read_stream(folder / "stream"), info
-        except (CablesimError, OSError, json.JSONDecodeError):
-            pass  # a damaged entry: simulate again
+    if not info_path.is_file():
+        return None
+    try:
+        info = json.loads(info_path.read_text())
+        if info.get("status") != "ok":
+            return None, info
+        return read_stream(folder / "stream"), info
+    except (CablesimError, OSError, json.JSONDecodeError):
+        return None  # a damaged entry: simulate again
+
+
+def _simulate(cfg: Any) -> tuple[dict[str, Any], Any]:
+    """(info, interaction result or None) of one simulated interaction."""
+    from cablesim.sim.session import SimSession
+
     session = None
+    res = None
     try:
         session = SimSession.build(cfg)
         try:
@@ -122,16 +153,24 @@ def simulate_stream(params: dict[str, Any], use_cache: bool = True) -> tuple[Any
     finally:
         if session is not None:
             session.close()
-    if use_cache:
-        folder.mkdir(parents=True, exist_ok=True)
-        if info["status"] == "ok":
-            write_stream(res.stream, folder / "stream", overwrite=True)
-        tmp = folder / f".info.{os.getpid()}.tmp"
-        tmp.write_text(json.dumps(info))
-        os.replace(tmp, info_path)
-    if info["status"] != "ok":
-        return None, info
-    return res.stream, info
+    return info, res
+
+
+def _store(folder: Path, info: dict[str, Any], res: Any) -> None:
+    """Write a cache entry: the stream (what an unfinished one left removed first), then
+    ``info.json``."""
+    import shutil
+
+    from cablesim.files import write_text
+    from cablesim.recording import write_stream
+
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "info.json").unlink(missing_ok=True)
+    for p in (folder / "stream", *folder.glob(".stream.*")):
+        shutil.rmtree(p, ignore_errors=True)
+    if info["status"] == "ok":
+        write_stream(res.stream, folder / "stream")
+    write_text(folder / "info.json", json.dumps(info))
 
 
 # --------------------------------------------------------------------------- tables 6.4 / 6.5

@@ -12,6 +12,9 @@
 Each scene of seeds A:B is randomised from its seed (background, hose count and colours,
 lighting, camera pose), so a sequence is the same whatever the number of workers.  Finished
 sequences are skipped (DIR/jobs/<sequence>.json); failures are listed by outcome at the end.
+A run killed at any point and started again gives the same files as one that never stopped
+(DIR/jobs/timings.jsonl aside); a second command writing into the same DIR at the same time is
+refused (DIR/.lock); a full disk stops the run with an error naming the file.
 """
 
 from __future__ import annotations
@@ -70,6 +73,7 @@ def dataset_jobs(
 
 
 def run(args: argparse.Namespace) -> int:
+    from cablesim.files import OutputLock, write_text
     from cablesim.jobs import execute, load_results, parse_range
 
     a, b = parse_range(args.scenes)
@@ -79,26 +83,28 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--scenes", "a MovingCables split holds at most 9999 clips")
     scene = {"width": args.width, "height": args.height}
     jobs = dataset_jobs(args.layout, a, b, args.out, args.split, scene, args.periods)
-    summary = execute(
-        jobs,
-        args.out / "jobs",
-        args.workers,
-        args.ray,
-        not args.quiet,
-        f"{args.layout} {args.split}",
-    )
-    recs = [r for r in load_results(args.out / "jobs", jobs) if r["status"] == "ok"]
-    if recs:
-        mb = [r["result"]["bytes"] / 1e6 for r in recs]
-        imgs = [r["result"]["images"] for r in recs]
-        print(
-            f"{len(recs)} sequences: {sum(imgs)} images, {sum(mb):.1f} MB "
-            f"({sum(mb) / len(recs):.1f} MB and {sum(imgs) / len(recs):.0f} images per sequence)"
+    with OutputLock(args.out):  # refused at once while another command writes there
+        summary = execute(
+            jobs,
+            args.out / "jobs",
+            args.workers,
+            args.ray,
+            not args.quiet,
+            f"{args.layout} {args.split}",
         )
-    (args.out / "jobs" / "summary.json").write_text(
-        json.dumps(
-            {"ok": summary.ok, "total": summary.total, "failures": summary.failures}, indent=1
+        recs = [r for r in load_results(args.out / "jobs", jobs) if r["status"] == "ok"]
+        if recs:
+            mb = [r["result"]["bytes"] / 1e6 for r in recs]
+            imgs = [r["result"]["images"] for r in recs]
+            print(
+                f"{len(recs)} sequences: {sum(imgs)} images, {sum(mb):.1f} MB "
+                f"({sum(mb) / len(recs):.1f} MB and {sum(imgs) / len(recs):.0f} images per sequence)"
+            )
+        write_text(
+            args.out / "jobs" / "summary.json",
+            json.dumps(
+                {"ok": summary.ok, "total": summary.total, "failures": summary.failures}, indent=1
+            ),
         )
-    )
-    print(summary.report())
-    return 0 if summary.ok == summary.total else 1
+        print(summary.report())
+        return 0 if summary.ok == summary.total else 1

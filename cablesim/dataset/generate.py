@@ -11,7 +11,12 @@
   the published layout, with its ground-truth mask under ``motion_correlation_annotations``.
 
 Everything a sequence holds follows from its seed (scene, hose, start segment), so a sequence
-is the same bytes whatever the number of workers that wrote the dataset.
+is the same bytes whatever the number of workers that wrote the dataset.  A sequence is written
+into a hidden staging folder (``.partial/`` beside its place) and moved into place when every
+file of it is written (:func:`cablesim.files.staged`); it counts as finished when its job's
+result file exists (:mod:`cablesim.jobs`), so a killed run leaves at most an unfinished
+sequence, which the next run removes and writes again.  A full disk stops the run with
+``DiskFullError`` naming the file; the finished sequences stay as they are.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import cv2
 import numpy as np
 
 from cablesim.errors import CablesimError, InputError
+from cablesim.files import commit, staged
 from cablesim.sim.config import SceneConfig
 
 STICK_DILATION = 2  # px, as the thesis dilates the poking stick's mask
@@ -142,8 +148,12 @@ def simulate_clip(
         session.close()
 
 
+CLIP_FOLDERS = ("rgb_clips", "flow_first_back", "normal_flow_first_back", "stick_masks")
+
+
 def write_sim_clip(split_dir: str | Path, name: str, clip: SimClip) -> int:
-    """Write a clip in the published layout; returns the bytes written."""
+    """Write a clip in the published layout (staged, then moved into place, replacing an
+    unfinished earlier one: module docstring); returns the bytes written."""
     from cablesim.formats.movingcables import ClipFrame, write_clip
 
     frames = [
@@ -153,10 +163,14 @@ def write_sim_clip(split_dir: str | Path, name: str, clip: SimClip) -> int:
         )
     ]
     split_dir = Path(split_dir)
-    write_clip(split_dir, name, frames)
-    total = 0
-    for folder in ("rgb_clips", "flow_first_back", "normal_flow_first_back", "stick_masks"):
-        total += sum(p.stat().st_size for p in (split_dir / folder / name).glob("*.png"))
+    with staged(split_dir, name) as tmp:
+        write_clip(tmp, name, frames)
+        total = 0
+        for folder in CLIP_FOLDERS:
+            total += sum(p.stat().st_size for p in (tmp / folder / name).glob("*.png"))
+        for folder in CLIP_FOLDERS:
+            if (tmp / folder / name).is_dir():
+                commit(tmp / folder / name, split_dir / folder / name)
     return total
 
 
@@ -234,25 +248,29 @@ def run_mcor(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
         stream = res.stream
         root = Path(params["root"])
         name = sequence_name_of(seed)
-        folder = root / "motion_correlation_buffers" / name
+        buffers = Path("motion_correlation_buffers") / name
+        annotations = Path("motion_correlation_annotations") / params["split"] / name
         masks = [f.arm_mask for f in stream.frames]
-        write_mcor(
-            folder,
-            stream,
-            segment=seg.mask,
-            arm_masks=dict(enumerate(masks)) if all(m is not None for m in masks) else None,
-            base_to_camera=np.linalg.inv(session.T_world_camera) @ session.T_world_base,
-            overwrite=True,
-        )
         truth = stream.target.truth.labels == session.hose
-        ann = write_annotation(
-            root / "motion_correlation_annotations",
-            params["split"],
-            name,
-            len(stream.frames) - 1,
-            truth,
-        )
-        nbytes = sum(p.stat().st_size for p in folder.iterdir()) + ann.stat().st_size
+        with staged(root, name) as tmp:  # both folders complete before either is in place
+            write_mcor(
+                tmp / buffers,
+                stream,
+                segment=seg.mask,
+                arm_masks=dict(enumerate(masks)) if all(m is not None for m in masks) else None,
+                base_to_camera=np.linalg.inv(session.T_world_camera) @ session.T_world_base,
+                overwrite=True,
+            )
+            ann = write_annotation(
+                tmp / annotations.parent.parent,
+                params["split"],
+                name,
+                len(stream.frames) - 1,
+                truth,
+            )
+            nbytes = sum(p.stat().st_size for p in (tmp / buffers).iterdir()) + ann.stat().st_size
+            commit(tmp / buffers, root / buffers)
+            commit(tmp / annotations, root / annotations)
         return {
             "status": "ok",
             "outcome": "ok",

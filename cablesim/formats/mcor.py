@@ -50,6 +50,7 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError, RecordingError
+from cablesim.files import write_image, write_text
 from cablesim.perception._checks import as_mask
 from cablesim.perception.frames import (
     LABEL_BACKGROUND,
@@ -396,8 +397,7 @@ def read_mcor(
 
 # --------------------------------------------------------------------------- writing
 def _write(path: Path, img: np.ndarray) -> None:
-    if not cv2.imwrite(str(path), img):
-        raise RecordingError(f"could not write {path}")
+    write_image(path, img)  # atomic; a full disk is a DiskFullError naming the file
 
 
 def write_mcor(
@@ -469,7 +469,7 @@ def write_mcor(
             d = np.nan_to_num(f.depth, nan=0.0, posinf=0.0, neginf=0.0)
             mm = np.clip(np.rint(d * 1000.0), 0, 65535).astype(np.uint16)
             _write(folder / _img("depth", i), mm)
-    (folder / JSON_NAME).write_text(json.dumps(doc, sort_keys=True, indent=4))
+    write_text(folder / JSON_NAME, json.dumps(doc, sort_keys=True, indent=4))
     return folder
 
 

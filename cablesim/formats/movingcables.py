@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError, RecordingError
+from cablesim.files import write_image
 from cablesim.perception._checks import as_flow, as_mask
 from cablesim.perception.flow import FlowEstimator, make_flow
 from cablesim.perception.metrics import (
@@ -118,8 +119,7 @@ def write_flow_png(path: str | Path, flow: np.ndarray, third: np.ndarray | None 
     :func:`uncertainty_channel` for a prediction)."""
     path = Path(path)
     rgb = encode_flow_png(flow, third)
-    if not cv2.imwrite(str(path), np.ascontiguousarray(rgb[..., ::-1])):
-        raise RecordingError(f"could not write {path}")
+    write_image(path, np.ascontiguousarray(rgb[..., ::-1]))
     return path
 
 
@@ -249,8 +249,7 @@ def write_clip(split: str | Path, clip: str, frames: Iterable[ClipFrame]) -> Pat
             raise InputError(
                 f"image {fr.index}: rgb must be HxWx3 uint8, got {rgb.dtype} {rgb.shape}"
             )
-        if not cv2.imwrite(str(out / name), np.ascontiguousarray(rgb[..., ::-1])):
-            raise RecordingError(f"could not write {out / name}")
+        write_image(out / name, np.ascontiguousarray(rgb[..., ::-1]))
         for folder, flow in ((FLOW_FOLDER, fr.flow), (NORMAL_FLOW_FOLDER, fr.normal_flow)):
             if flow is not None:
                 (split / folder / clip).mkdir(parents=True, exist_ok=True)
@@ -258,8 +257,7 @@ def write_clip(split: str | Path, clip: str, frames: Iterable[ClipFrame]) -> Pat
         if fr.stick_mask is not None:
             (split / STICK_FOLDER / clip).mkdir(parents=True, exist_ok=True)
             m = as_mask(fr.stick_mask, rgb.shape[:2], name=f"stick mask {fr.index}")
-            if not cv2.imwrite(str(split / STICK_FOLDER / clip / name), m.astype(np.uint8) * 255):
-                raise RecordingError(f"could not write {split / STICK_FOLDER / clip / name}")
+            write_image(split / STICK_FOLDER / clip / name, m.astype(np.uint8) * 255)
     if first:
         raise InputError("a clip needs at least one image")
     return split
