@@ -1,5 +1,7 @@
 """Named errors.  Every error a user can provoke with bad input derives from CablesimError."""
 
+from cablesim.outcomes import Outcome
+
 
 class CablesimError(Exception):
     """Base class of all cablesim errors."""
@@ -20,7 +22,7 @@ class InputError(CablesimError, ValueError):
 class PhysicsDivergedError(CablesimError, RuntimeError):
     """The simulation produced NaN/inf or MuJoCo reported an instability."""
 
-    outcome = "diverged"
+    outcome = Outcome.DIVERGED
 
 
 class UnreachableError(CablesimError, RuntimeError):
@@ -76,14 +78,14 @@ class SceneError(CablesimError, RuntimeError):
     """A simulated scene that cannot give an experiment what it needs.  ``outcome`` is the
     name under which a run records it (``InteractionResult.outcome``)."""
 
-    outcome = "scene_error"
+    outcome = Outcome.SCENE_ERROR
 
 
 class SceneUnsettledError(SceneError):
     """The scene did not come to rest within the settle time (no divergence: its hoses still
     creep or chatter faster than ``physics.settle_speed``)."""
 
-    outcome = "scene_unsettled"
+    outcome = Outcome.SCENE_UNSETTLED
 
     def __init__(self, message: str, speed: float = float("nan"), limit: float = float("nan")):
         self.speed, self.limit = speed, limit
@@ -94,7 +96,7 @@ class NoGraspableSegmentError(SceneError, UnreachableError):
     """The hose of interest shows no visible, reachable, graspable segment; ``reasons`` counts
     why the candidates were turned down."""
 
-    outcome = "no_graspable_segment"
+    outcome = Outcome.NO_GRASPABLE_SEGMENT
 
     def __init__(self, message: str, reasons: dict[str, int] | None = None):
         self.reasons = dict(reasons or {})

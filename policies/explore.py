@@ -74,7 +74,7 @@ class Interaction:
     flow_example: tuple[np.ndarray, np.ndarray] | None = None  # (estimated, ground truth)
     timings: dict[str, float] = field(default_factory=dict)
     episode: dict[str, Any] = field(default_factory=dict)
-    outcome: str = ""  # named outcome (cablesim.episode.runner.OUTCOMES)
+    outcome: str = ""  # named outcome (a cablesim.outcomes.Outcome)
 
     def to_dict(self) -> dict[str, Any]:
         return {

@@ -2,7 +2,11 @@
 
 They only use the robot interface, so the same code drives the simulated Panda and the real
 one.  None of them raises for an unreachable target, a joint limit or a collision: each
-returns a :class:`PrimitiveResult` that is falsy and says why.
+returns a :class:`PrimitiveResult` that is falsy, says why and names the
+:class:`~cablesim.outcomes.Outcome`: the failed motion's own (``MoveResult.outcome``) where the
+robot named one, else the primitive's for the step that failed (a grasp that does not hold:
+``GRASP_NOT_HELD``; a pre-grasp or push pose out of reach: ``UNREACHABLE``; an action stroke:
+``ACTION_FAILED``; ``RELEASE_FAILED``, ``RETREAT_FAILED``).
 
 - :func:`grasp_at`: pre-grasp in front of the point, straight approach along the board normal
   (made orthogonal to the hose axis: the hand's approach axis), close across the hose axis, and a hold check (pull back by a few millimetres and compare the
@@ -25,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from cablesim.episode.config import ActionConfig, GraspConfig, InteractionConfig, RetreatConfig
+from cablesim.outcomes import Outcome
 from cablesim.panda.description import RETRACT_QPOS
 from cablesim.robot.base import MoveResult, Robot
 from cablesim.robot.grasping import avoiding_hoses, move_joints_safely
@@ -38,20 +43,30 @@ HosePointProbe = Callable[[], np.ndarray]
 
 @dataclass
 class PrimitiveResult:
-    """Outcome of a primitive; truthy on success.  ``details`` holds measured numbers."""
+    """What a primitive did; truthy on success.  ``details`` holds measured numbers,
+    ``outcome`` names a failure (``Outcome.OK`` on success), ``moved`` says whether the arm
+    moved at all (a failure before any motion leaves nothing to clean up)."""
 
     success: bool
     reason: str = ""
     pose: Pose | None = None
     details: dict[str, Any] = field(default_factory=dict)
+    outcome: Outcome = Outcome.OK
+    moved: bool = True
 
     def __bool__(self) -> bool:
         return self.success
 
     @staticmethod
-    def fail(step: str, move: MoveResult | str, **details: Any) -> PrimitiveResult:
+    def fail(
+        step: str, move: MoveResult | str, outcome: Outcome, **details: Any
+    ) -> PrimitiveResult:
+        """A failed ``step``: ``move`` (a failed motion, or why in words) and the step's
+        ``outcome``, which a motion that names its own outcome overrides."""
         why = move if isinstance(move, str) else move.reason
-        return PrimitiveResult(False, f"{step}: {why}", details=dict(details))
+        if isinstance(move, MoveResult) and move.outcome is not None:
+            outcome = move.outcome
+        return PrimitiveResult(False, f"{step}: {why}", details=dict(details), outcome=outcome)
 
 
 def _unit(v: Sequence[float] | np.ndarray) -> np.ndarray:
@@ -205,7 +220,7 @@ def _to_pose_via_retract(
     too or its line is blocked, the joint motion goes straight to ``pose``."""
     q = robot.solve_ik(pose)
     if q is None:
-        return MoveResult(False, "no IK solution")
+        return MoveResult(False, "no IK solution", outcome=Outcome.UNREACHABLE)
     q_stage = None
     for back in (standoff, standoff / 2) if standoff > 0 else ():
         stage = pose.translated(-back * pose.rotation[:, 2])
@@ -215,7 +230,7 @@ def _to_pose_via_retract(
                 break
     r = move_joints_safely(robot, RETRACT_QPOS, speed_factor)
     if not r:
-        return MoveResult(False, f"could not retract first: {r.reason}")
+        return MoveResult(False, f"could not retract first: {r.reason}", outcome=r.outcome)
     if q_stage is not None:
         r = robot.move_joints(q_stage, speed_factor)
         if r:
@@ -301,7 +316,7 @@ def _grasp_at(
     retries = 0
     moved = False
     at_pregrasp = False  # the hand waits at a pre-grasp after a failed attempt
-    result = PrimitiveResult(False, "grasp: no attempt")
+    result = PrimitiveResult(False, "grasp: no attempt", outcome=Outcome.UNREACHABLE)
     for k, off in enumerate(offsets):
         point = np.asarray(centre, float) + off * along
         result = _grasp_once(robot, point, axis, cfg, app, hose_point, at_pregrasp)
@@ -327,6 +342,7 @@ def _grasp_at(
     result.details.pop("pose", None)
     result.details.pop("retriable", None)
     result.details.update(retries=retries, attempts=attempts, moved=moved)
+    result.moved = moved
     return result
 
 
@@ -334,14 +350,14 @@ def _back_out(robot: Robot, cfg: GraspConfig, g: Pose | None) -> PrimitiveResult
     """Open and move straight back to the pre-grasp of the failed grasp pose ``g``."""
     robot.open(cfg.open_width)
     if g is None:
-        return PrimitiveResult(False, "back out: no grasp pose")
+        return PrimitiveResult(False, "back out: no grasp pose", outcome=Outcome.GRASP_NOT_HELD)
     pre = g.translated(-cfg.pregrasp_offset * g.rotation[:, 2])
     r = robot.move_to(pre, speed=cfg.approach_speed)
     # stopping a few mm short of the pre-grasp (a hose brushing the open hand) still leaves
     # the hand clear of the hose for the next attempt, which starts with a move to its own
     # pre-grasp; a refused or colliding motion does not
     if not r and not _stopped_short(r, cfg.hold_check_distance):
-        return PrimitiveResult.fail("back out", r)
+        return PrimitiveResult.fail("back out", r, Outcome.GRASP_NOT_HELD)
     return PrimitiveResult(True, details={"short_by": float(r.position_error)} if not r else {})
 
 
@@ -363,19 +379,26 @@ def _grasp_once(
     before any motion), ``retriable`` (a failure a neighbouring point may cure), ``pose``."""
     g, why = choose_grasp_pose(robot, centre, axis, app, cfg.pregrasp_offset)
     if g is None:
-        return PrimitiveResult(False, f"grasp: {why}", details={"moved": False})
+        return PrimitiveResult(
+            False, f"grasp: {why}", details={"moved": False}, outcome=Outcome.UNREACHABLE
+        )
     app = g.rotation[:, 2]  # the hand's approach axis: the board normal made orthogonal to the hose
     pre = g.translated(-cfg.pregrasp_offset * app)
     if not robot.open(cfg.open_width):
-        return PrimitiveResult.fail("grasp", "the gripper did not open", moved=False)
+        # named unreachable since the first runner (a grasp that fails before moving)
+        return PrimitiveResult.fail(
+            "grasp", "the gripper did not open", Outcome.UNREACHABLE, moved=False
+        )
     r = robot.move_to(pre, speed=cfg.approach_speed) if from_pregrasp else MoveResult(False)
     if not r:
         r = _to_pose_via_retract(robot, pre, standoff=cfg.standoff, travel_speed=cfg.travel_speed)
     if not r:
-        return PrimitiveResult.fail("move to pre-grasp", r, moved=True)
+        return PrimitiveResult.fail("move to pre-grasp", r, Outcome.UNREACHABLE, moved=True)
     r = robot.move_to(g, speed=cfg.approach_speed)
     if not r:
-        return PrimitiveResult.fail("approach", r, moved=True, retriable=True, pose=g)
+        return PrimitiveResult.fail(
+            "approach", r, Outcome.GRASP_NOT_HELD, moved=True, retriable=True, pose=g
+        )
     held = robot.grasp(
         width=cfg.width,
         force=cfg.force,
@@ -385,12 +408,13 @@ def _grasp_once(
     opening = robot.gripper_opening
     details: dict[str, Any] = {"opening": opening, "moved": True, "retriable": True, "pose": g}
     if not held:
-        return PrimitiveResult.fail(
-            "close", f"nothing held (fingers closed to {opening * 1000:.1f} mm)", **details
-        )
+        why = f"nothing held (fingers closed to {opening * 1000:.1f} mm)"
+        return PrimitiveResult.fail("close", why, Outcome.GRASP_NOT_HELD, **details)
     probe = hose_point(g) if hose_point is not None else None
     if hose_point is not None and probe is None:
-        return PrimitiveResult.fail("close", "no hose between the fingers", **details)
+        return PrimitiveResult.fail(
+            "close", "no hose between the fingers", Outcome.GRASP_NOT_HELD, **details
+        )
     if probe is not None and cfg.hold_check_distance > 0:
         p0, h0 = probe(), robot.ee_pose().position
         r = robot.move_to(g.translated(-cfg.hold_check_distance * app), speed=cfg.approach_speed)
@@ -400,19 +424,22 @@ def _grasp_once(
             not r.reason.startswith("target not reached") or pulled < 0.3 * cfg.hold_check_distance
         ):
             # the hand did not pull back far enough to tell whether the hose follows
-            return PrimitiveResult.fail("hold check", r, pulled=pulled, **details)
+            return PrimitiveResult.fail(
+                "hold check", r, Outcome.GRASP_NOT_HELD, pulled=pulled, **details
+            )
         err = float(np.linalg.norm((p1 - p0) - (h1 - h0)))
         details["hold_error"] = err
         if not r:  # a taut hose held the hand short of its target: the hold is judged all the same
             details["hold_check_short_by"] = float(r.position_error)
         r = robot.move_to(g, speed=cfg.approach_speed)
         if not r and not _stopped_short(r, cfg.hold_check_distance):
-            return PrimitiveResult.fail("hold check return", r, **details)
+            return PrimitiveResult.fail("hold check return", r, Outcome.GRASP_NOT_HELD, **details)
         if err > cfg.hold_tolerance:
             return PrimitiveResult.fail(
                 "hold check",
                 f"the hose lagged the hand by {err * 1000:.1f} mm "
                 f"(tolerance {cfg.hold_tolerance * 1000:.1f} mm)",
+                Outcome.GRASP_NOT_HELD,
                 **details,
             )
     details.pop("retriable")
@@ -441,7 +468,8 @@ def _run_waypoints(
     """Stroke by stroke; a stroke that ends off its target because the hose pulls the hand
     back counts as done when it ends within ``tolerance`` of the target or the hand covered at
     least ``min_coverage`` of the stroke along its direction (a taut hose stopped it); each is
-    noted (distance to the target) in ``details["short_strokes"]``."""
+    noted (distance to the target) in ``details["short_strokes"]``.  A stroke that fails is
+    ``ACTION_FAILED`` unless its motion named the outcome (unreachable, a collision)."""
     short: list[float] = []
     for i, w in enumerate(waypoints):
         start = robot.ee_pose().position
@@ -453,7 +481,10 @@ def _run_waypoints(
             )
             if not ok:
                 return PrimitiveResult.fail(
-                    f"{step} stroke {i + 1}/{len(waypoints)}", r, short_strokes=short
+                    f"{step} stroke {i + 1}/{len(waypoints)}",
+                    r,
+                    Outcome.ACTION_FAILED,
+                    short_strokes=short,
                 )
             short.append(float(r.position_error))
     return PrimitiveResult(
@@ -528,7 +559,7 @@ def _approach_for_push(
     app = _unit(approach)
     g, why = choose_grasp_pose(robot, centre, axis, app, cfg.pregrasp_offset)
     if g is None:
-        return PrimitiveResult(False, f"push: {why}")
+        return PrimitiveResult(False, f"push: {why}", outcome=Outcome.UNREACHABLE, moved=False)
     app = g.rotation[:, 2]
     g = g.translated(-standoff * app)
     robot.open(0.0)
@@ -539,17 +570,21 @@ def _approach_for_push(
         travel_speed=cfg.travel_speed,
     )
     if not r:
-        return PrimitiveResult.fail("move to pre-push", r)
+        return PrimitiveResult.fail("move to pre-push", r, Outcome.UNREACHABLE)
     r = robot.move_to(g, speed=cfg.approach_speed)
     if not r:
-        return PrimitiveResult.fail("push approach", r)
+        return PrimitiveResult.fail("push approach", r, Outcome.UNREACHABLE)
     return PrimitiveResult(True, pose=g)
 
 
 # ---------------------------------------------------------------------- leave
 def release(robot: Robot, width: float = 0.08) -> PrimitiveResult:
     ok = robot.open(width)
-    return PrimitiveResult(ok, "" if ok else "release: the gripper did not open")
+    if ok:
+        return PrimitiveResult(True)
+    return PrimitiveResult(
+        False, "release: the gripper did not open", outcome=Outcome.RELEASE_FAILED
+    )
 
 
 def retreat(
@@ -574,7 +609,6 @@ def retreat(
         notes.append(f"retract skipped ({r.reason})")
     r = robot.move_joints(np.asarray(qpos, dtype=float), speed_factor=cfg.speed_factor)
     if not r:
-        return PrimitiveResult.fail(
-            "retreat", f"{r.reason} ({'; '.join(notes)})" if notes else r.reason, notes=notes
-        )
+        why = f"{r.reason} ({'; '.join(notes)})" if notes else r.reason
+        return PrimitiveResult.fail("retreat", why, Outcome.RETREAT_FAILED, notes=notes)
     return PrimitiveResult(True, details={"notes": notes})

@@ -5,17 +5,28 @@ and the real robot alike.
     result.stream            # kept action frames (1 mm rule) ..., target frame last
     print(result.summary())  # frames kept per action (+ follow gain with a truth provider)
 
-Steps: centre + axis of the segment from the current depth image (perception's
-``segment_pose``); grasp there across the axis (approach along the board normal, then a hold
-check when a ground-truth provider can tell whether the hose follows); one periodic action per
-configured direction while the clock streams frames; release, back off, joint motion out of
-view, wait until the hoses are still (the clock's ``wait_still``), target frame (with ground
-truth: checked for zero robot pixels), and with ground truth the flow from the target frame to
-every kept frame.  A failure (unreachable, collision, slipping grasp, robot in view) comes back
-as ``InteractionResult(success=False, outcome=..., reason=...)``, ``outcome`` one of
-:data:`OUTCOMES`; only a diverging simulation or a lost connection raises.  A grasp that does
-not hold is retried at neighbouring points of the segment before the interaction fails
-(:func:`~cablesim.episode.primitives.grasp_at`); ``result.grasp_retries`` counts the retries.
+The interaction is five phases (:data:`PHASES`) over one :class:`InteractionState`, each
+returning whether the interaction goes on:
+
+1. :func:`locate`: centre + axis of the segment from the current depth image (perception's
+   ``segment_pose``);
+2. :func:`grasp`: grasp there across the axis (approach along the board normal, then a hold
+   check when a ground-truth provider can tell whether the hose follows), or bring the closed
+   gripper in front of the hose for a push;
+3. :func:`act`: one periodic action per configured direction while the clock streams frames;
+4. :func:`retreat`: release, back off, joint motion out of view, wait until the hoses are still
+   (the clock's ``wait_still``), target frame (with ground truth: checked for zero robot
+   pixels);
+5. :func:`finish`: with ground truth the flow from the target frame to every kept frame; the
+   stream and the timings.
+
+A failure (unreachable, collision, slipping grasp, robot in view) comes back as
+``InteractionResult(success=False, outcome=..., reason=...)``, ``outcome`` an
+:class:`~cablesim.outcomes.Outcome` named where the failure was detected (the robot's motion,
+the primitive, the phase); only a diverging simulation or a lost connection raises.  A grasp
+that does not hold is retried at neighbouring points of the segment before the interaction
+fails (:func:`~cablesim.episode.primitives.grasp_at`); ``result.grasp_retries`` counts the
+retries.
 With ground truth, a hose that slips during an action (the grasped point follows the hand with
 R^2 below ``grasp.min_follow_r2``) is ``grasp_not_held`` too.
 
@@ -28,7 +39,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,44 +53,12 @@ from cablesim.episode.config import InteractionConfig
 from cablesim.episode.truth import FrameSink, TruthProvider
 from cablesim.errors import InputError
 from cablesim.jsonutil import jsonable
+from cablesim.outcomes import OUTCOMES, Outcome
 from cablesim.perception.frames import LABEL_ROBOT, Stream
 from cablesim.perception.geometry import segment_pose
 from cablesim.progress import Say, quiet
 from cablesim.robot.base import Robot
 from cablesim.robot.pose import Pose
-
-#: Named outcomes of an interaction (``InteractionResult.outcome``) and of the runs that
-#: record one per seed or start (``simulate_episode``, ``explore``, ``benchmarks/seeds.py``).
-OUTCOMES: dict[str, str] = {
-    "ok": "the interaction ran; target frame captured",
-    "segment_invalid": "the segment is malformed or has too little depth under it",
-    "unreachable": "the grasp, its pre-grasp, an action end point or the path there is out of "
-    "reach (IK, joint limits, a collision the arm model's check predicts)",
-    "collision": "a motion stopped on a contact in the scene (board, table, a coupling)",
-    "grasp_not_held": "the fingers closed on nothing or the hose slipped, after every retry; "
-    "with ground truth also a grasped hose that did not follow the hand during an action",
-    "action_failed": "an action stroke ended off its target (the hose held the hand back)",
-    "release_failed": "the gripper did not open",
-    "retreat_failed": "the arm could not move out of view",
-    "robot_in_view": "the robot is visible in the target frame",
-    # simulation: the scene before any interaction (see cablesim.sim.session)
-    "scene_unsettled": "no scene draw settled (cablesim.errors.SceneUnsettledError)",
-    "no_graspable_segment": "no scene draw had a hose of interest with a graspable segment",
-    "diverged": "the physics diverged (cablesim.errors.PhysicsDivergedError): NaN, a MuJoCo "
-    "warning, or a hose edge stretched past physics.max_hose_strain",
-}
-
-
-def failure_outcome(reason: str, default: str) -> str:
-    """The named outcome of a failed motion step from its reason (``default`` otherwise)."""
-    r = reason.lower()
-    if "collision in scene" in r or "contact:" in r:
-        return "collision"
-    if any(k in r for k in ("unreachable", "no ik", "ik did not converge", "joint limit")):
-        return "unreachable"
-    if "ik jumped" in r or "collision:" in r:  # planned: the arm model predicts it
-        return "unreachable"
-    return default
 
 
 @dataclass
@@ -110,7 +89,7 @@ class ActionReport:
 class InteractionResult:
     success: bool
     reason: str = ""
-    outcome: str = ""  # one of OUTCOMES ("ok" on success)
+    outcome: Outcome | None = None  # set by every return of run_interaction (OK on success)
     grasp_retries: int = 0  # re-approaches at neighbouring points before the grasp held
     stream: Stream | None = None
     hose: int | None = None
@@ -218,156 +197,266 @@ def segment_grasp_target(
     return mask, prim.grasp_centre(T, sp.centre, surface_offset), T[:3, :3] @ sp.axis
 
 
-# ---------------------------------------------------------------------- runner
-def run_interaction(
-    robot: Robot,
-    camera: Camera,
-    clock: Clock,
-    segment: np.ndarray,
-    config: InteractionConfig | None = None,
-    truth: TruthProvider | None = None,
-    sink: FrameSink | None = None,
-    say: Say | None = None,
-    hose: int | None = None,
-    park: Sequence[float] | None = None,
-    arm_mask: ArmMaskFunction | None = None,
-    retry_rng: np.random.Generator | None = None,
-) -> InteractionResult:
-    """Grasp (or push) the hose at ``segment`` of the current image and act (module docstring).
+# ---------------------------------------------------------------------- state
+@dataclass
+class InteractionOptions:
+    """What an interaction may be given besides its devices and its configuration: run-time
+    companions, none of them saved with a run.
 
-    ``segment``: HxW bool mask or (N, 2) pixels (u, v) in the camera's current image.
-    ``hose``: the hose's index when it is known without ground truth (recorded only).
-    ``park``: the joint configuration out of view used when ``config.retreat.qpos`` is None.
-    ``sink`` (e.g. :class:`~cablesim.recording.RecordingWriter`) gets every frame as soon as
-    it exists.  ``arm_mask`` (``(tick) -> HxW bool``, e.g.
-    :meth:`cablesim.panda.arm_mask.ArmMasker.for_tick`) fills every frame's ``arm_mask``.
-    it exists.  ``retry_rng`` picks the side of the first grasp retry (see ``grasp_at``).
+    | field | what it is |
+    | --- | --- |
+    | `sink` | gets every frame as soon as it exists (e.g. `cablesim.recording.RecordingWriter`) |
+    | `say` | progress lines (default: none) |
+    | `hose` | the hose's index when it is known without ground truth (recorded only) |
+    | `park` | the joint configuration out of view used when `config.retreat.qpos` is None |
+    | `arm_mask` | `(tick) -> HxW bool` for every frame's `arm_mask` (`ArmMasker.for_tick`) |
+    | `retry_rng` | picks the side of the first grasp retry (`primitives.grasp_at`) |
     """
-    cfg = (config or InteractionConfig()).validate()
-    say = say or quiet
-    t_start, c_start = time.perf_counter(), time.process_time()
-    approach = np.asarray(prim.DEFAULT_APPROACH, float)
-    T = np.asarray(
-        camera.T_world_camera if camera.T_world_camera is not None else robot.T_world_camera, float
-    )
-    retreat_q = cfg.retreat.joint_target(None if park is None else tuple(park))
-    result = InteractionResult(False, hose=hose)
 
-    # 1. centre and axis of the segment from depth (SPEC 3.1)
-    image = camera.capture()
+    sink: FrameSink | None = None
+    say: Say | None = None
+    hose: int | None = None
+    park: Sequence[float] | None = None
+    arm_mask: ArmMaskFunction | None = None
+    retry_rng: np.random.Generator | None = None
+
+
+@dataclass
+class InteractionState:
+    """What the phases of one interaction share: the devices, the validated configuration, the
+    result being filled in and what one phase hands to the next (the grasp pose in
+    ``result.grasp``, the frame collector, the action directions)."""
+
+    robot: Robot
+    camera: Camera
+    clock: Clock
+    segment: np.ndarray
+    cfg: InteractionConfig
+    truth: TruthProvider | None  # None also when the configuration asks for no ground truth
+    options: InteractionOptions
+    say: Say
+    T: np.ndarray  # T_world_camera
+    retreat_q: Sequence[float]
+    result: InteractionResult
+    approach: np.ndarray = field(default_factory=lambda: np.asarray(prim.DEFAULT_APPROACH, float))
+    collector: FrameCollector | None = None
+    directions: list[tuple[str, np.ndarray]] = field(default_factory=list)
+    t_start: float = field(default_factory=time.perf_counter)
+    c_start: float = field(default_factory=time.process_time)
+
+    @classmethod
+    def begin(
+        cls,
+        robot: Robot,
+        camera: Camera,
+        clock: Clock,
+        segment: np.ndarray,
+        config: InteractionConfig | None = None,
+        truth: TruthProvider | None = None,
+        options: InteractionOptions | None = None,
+    ) -> InteractionState:
+        cfg = (config or InteractionConfig()).validate()
+        opts = options or InteractionOptions()
+        T = camera.T_world_camera if camera.T_world_camera is not None else robot.T_world_camera
+        park = None if opts.park is None else tuple(opts.park)
+        return cls(
+            robot,
+            camera,
+            clock,
+            segment,
+            cfg,
+            truth if cfg.capture.ground_truth else None,
+            opts,
+            opts.say or quiet,
+            np.asarray(T, float),
+            cfg.retreat.joint_target(park),
+            InteractionResult(False, hose=opts.hose),
+        )
+
+    def fail(self, outcome: Outcome, reason: str) -> bool:
+        """End the interaction as failed with ``outcome`` (False: for a phase to return)."""
+        r = self.result
+        r.success, r.outcome, r.reason, r.stream = False, outcome, reason, None
+        self.say(f"failed: {reason}")
+        return False
+
+    def abort(self, outcome: Outcome, reason: str, moved: bool = True) -> bool:
+        """Leave the scene clean (open, retreat) after a failure when the arm ``moved``, then
+        end the interaction as failed."""
+        if moved:
+            prim.release(self.robot, self.cfg.grasp.open_width)
+            r = prim.retreat(
+                self.robot,
+                self.retreat_q,
+                self.cfg.retreat,
+                prim.DEFAULT_APPROACH,
+                self.cfg.grasp.travel_speed,
+            )
+            if not r:
+                reason += f"; retreat after the failure failed too ({r.reason})"
+        return self.fail(outcome, reason)
+
+
+# ---------------------------------------------------------------------- phases
+def locate(s: InteractionState) -> bool:
+    """Centre and axis of the segment from depth (SPEC 3.1); the hose under it with truth."""
+    image = s.camera.capture()
+    result = s.result
     try:
-        mask, centre, axis = segment_grasp_target(segment, image, T, cfg.grasp.surface_offset)
+        mask, centre, axis = segment_grasp_target(s.segment, image, s.T, s.cfg.grasp.surface_offset)
     except InputError as e:
-        result.reason, result.outcome = f"segment: {e}", "segment_invalid"
-        return result
-    if truth is not None and cfg.capture.ground_truth:
-        seen = truth.hose_under(mask)
-        result.hose = hose if seen is None else seen
+        result.reason, result.outcome = f"segment: {e}", Outcome.SEGMENT_INVALID
+        return False
+    if s.truth is not None:
+        seen = s.truth.hose_under(mask)
+        result.hose = s.options.hose if seen is None else seen
     result.centre, result.axis = centre, axis
-    say(f"segment: {int(mask.sum())} px, centre {np.round(centre, 3)}, hose {result.hose}")
-    truth = truth if cfg.capture.ground_truth else None
+    s.say(f"segment: {int(mask.sum())} px, centre {np.round(centre, 3)}, hose {result.hose}")
+    return True
 
-    # 2. grasp (or bring the closed gripper in front of the hose for a push)
+
+def grasp(s: InteractionState) -> bool:
+    """Grasp at the centre across the axis (or bring the closed gripper in front of the hose
+    for a push); the outcome of a failure is the primitive's."""
+    cfg, result = s.cfg, s.result
+    assert result.centre is not None and result.axis is not None
     t0 = time.perf_counter()
     if cfg.kind == "grasp":
-        probe = None
-        if truth is not None:
-            held_hose = result.hose
-            probe = lambda pose: truth.grasp_probe(pose, held_hose)  # noqa: E731
-        g = prim.grasp_at(robot, centre, axis, cfg.grasp, approach, hose_point=probe, rng=retry_rng)
+        g = prim.grasp_at(
+            s.robot,
+            result.centre,
+            result.axis,
+            cfg.grasp,
+            s.approach,
+            hose_point=_hold_probe(s.truth, result.hose),
+            rng=s.options.retry_rng,
+        )
     else:
-        g = prim.approach_for_push(robot, centre, axis, cfg.grasp, approach)
+        g = prim.approach_for_push(s.robot, result.centre, result.axis, cfg.grasp, s.approach)
     result.timings["grasp"] = time.perf_counter() - t0
     result.details["grasp"] = g.details
     result.grasp_retries = int(g.details.get("retries", 0))
     if not g:
-        # a push and a grasp's first attempt that fail with "push:"/"grasp:" never moved
-        moved = bool(g.details.get("moved", not g.reason.startswith(("grasp:", "push:"))))
-        step = g.reason.split(":", 1)[0]
-        held = step in ("close", "hold check", "hold check return", "approach", "back out")
-        result.outcome = failure_outcome(g.reason, "grasp_not_held" if held else "unreachable")
-        return _abort(result, robot, cfg, retreat_q, g.reason, say, moved=moved)
+        return s.abort(g.outcome, g.reason, moved=g.moved)
     result.grasp = g.pose
     assert g.pose is not None
     verb = "grasped" if cfg.kind == "grasp" else "at"
-    say(f"{verb} hose at {np.round(g.pose.position, 3)} ({jsonable(g.details)})")
+    s.say(f"{verb} hose at {np.round(g.pose.position, 3)} ({jsonable(g.details)})")
+    return True
 
-    # 3. actions, frames from the clock
-    if truth is not None:
-        truth.begin_interaction(result.hose, g.pose)
-    collector = FrameCollector(T, cfg.capture.min_gripper_step, truth, sink, arm_mask)
+
+def _hold_probe(truth: TruthProvider | None, hose: int | None) -> Callable[[Pose], Any] | None:
+    """The hold check's ``hose_point`` (ground truth only)."""
+    if truth is None:
+        return None
+    return lambda pose: truth.grasp_probe(pose, hose)
+
+
+def act(s: InteractionState) -> bool:
+    """Every configured action while the clock streams frames into the collector."""
+    cfg, result = s.cfg, s.result
+    assert result.grasp is not None and result.axis is not None
+    if s.truth is not None:
+        s.truth.begin_interaction(result.hose, result.grasp)
+    s.collector = FrameCollector(
+        s.T, cfg.capture.min_gripper_step, s.truth, s.options.sink, s.options.arm_mask
+    )
     if cfg.kind == "grasp":
-        directions = prim.action_directions(cfg.actions, axis, T, approach)
+        s.directions = prim.action_directions(cfg.actions, result.axis, s.T, s.approach)
     else:
-        directions = [("push", approach)]
+        s.directions = [("push", s.approach)]
     t0 = time.perf_counter()
-    for a, (label, u) in enumerate(directions):
-        ticks_before = collector.ticks
-        collector.begin_action(a)
-        try:
-            with clock.streaming(collector.on_tick):
-                r = _act(robot, cfg, g.pose, u)
-        finally:
-            collector.end_action()
-        rep = ActionReport(label, u, collector.ticks - ticks_before, collector.kept(a))
-        if truth is not None and cfg.kind == "grasp":
-            at = truth.action_truth(a, u)
-            rep.gain, rep.gain_r2, rep.hose_displacement = at.gain, at.gain_r2, at.hose_displacement
-        elif truth is not None:
-            rep.hose_displacement = truth.action_truth(a, u).hose_displacement
-        result.actions.append(rep)
-        if r.details.get("short_strokes"):
-            result.details[f"action{a}_short_strokes_m"] = r.details["short_strokes"]
-        say(f"action {a} ({label}): {rep.frames_kept}/{rep.ticks} frames kept, gain {rep.gain:.3f}")
-        if not r:
-            result.outcome = failure_outcome(r.reason, "action_failed")
-            return _abort(result, robot, cfg, retreat_q, f"action {a} ({label}): {r.reason}", say)
-        if rep.gain_r2 < cfg.grasp.min_follow_r2:  # NaN (no truth, no samples) passes
-            result.outcome = "grasp_not_held"
-            why = (
-                f"action {a} ({label}): the grasped hose did not follow the hand (follow R^2 "
-                f"{rep.gain_r2:.2f} < {cfg.grasp.min_follow_r2}: it slipped in the gripper or "
-                f"was pulled loose; largest hose displacement "
-                f"{max(rep.hose_displacement, default=0.0) * 1000:.0f} mm)"
-            )
-            return _abort(result, robot, cfg, retreat_q, why, say)
+    for a, (label, u) in enumerate(s.directions):
+        if not _one_action(s, a, label, u):
+            return False
     result.timings["actions"] = time.perf_counter() - t0
+    return True
 
-    # 4. release, out of view, wait until still, target frame
+
+def _one_action(s: InteractionState, a: int, label: str, u: np.ndarray) -> bool:
+    """Action ``a`` along ``u``: its frames, its report, and whether the hose followed."""
+    cfg, result, collector = s.cfg, s.result, s.collector
+    assert collector is not None and result.grasp is not None
+    ticks_before = collector.ticks
+    collector.begin_action(a)
+    try:
+        with s.clock.streaming(collector.on_tick):
+            r = _strokes(s.robot, cfg, result.grasp, u)
+    finally:
+        collector.end_action()
+    rep = ActionReport(label, u, collector.ticks - ticks_before, collector.kept(a))
+    if s.truth is not None and cfg.kind == "grasp":
+        at = s.truth.action_truth(a, u)
+        rep.gain, rep.gain_r2, rep.hose_displacement = at.gain, at.gain_r2, at.hose_displacement
+    elif s.truth is not None:
+        rep.hose_displacement = s.truth.action_truth(a, u).hose_displacement
+    result.actions.append(rep)
+    if r.details.get("short_strokes"):
+        result.details[f"action{a}_short_strokes_m"] = r.details["short_strokes"]
+    s.say(f"action {a} ({label}): {rep.frames_kept}/{rep.ticks} frames kept, gain {rep.gain:.3f}")
+    if not r:
+        return s.abort(r.outcome, f"action {a} ({label}): {r.reason}")
+    if rep.gain_r2 < cfg.grasp.min_follow_r2:  # NaN (no truth, no samples) passes
+        why = (
+            f"action {a} ({label}): the grasped hose did not follow the hand (follow R^2 "
+            f"{rep.gain_r2:.2f} < {cfg.grasp.min_follow_r2}: it slipped in the gripper or "
+            f"was pulled loose; largest hose displacement "
+            f"{max(rep.hose_displacement, default=0.0) * 1000:.0f} mm)"
+        )
+        return s.abort(Outcome.GRASP_NOT_HELD, why)
+    return True
+
+
+def _strokes(robot: Robot, cfg: InteractionConfig, g1: Pose, u: np.ndarray) -> prim.PrimitiveResult:
+    a = cfg.actions
+    if cfg.kind == "grasp":
+        return prim.periodic_action(
+            robot, g1, u, a.amplitude, a.periods, a.speed, a.stroke_tolerance, a.min_stroke_coverage
+        )
+    return prim.push(robot, g1, u, cfg.push_depth, a.periods, a.speed, a.stroke_tolerance)
+
+
+def retreat(s: InteractionState) -> bool:
+    """Release, out of view, wait until the hoses are still, target frame (with ground truth
+    and ``retreat.verify``: no robot pixels in it)."""
+    cfg, result, collector = s.cfg, s.result, s.collector
+    assert collector is not None
     t0 = time.perf_counter()
-    r = prim.release(robot, cfg.grasp.open_width)
+    r = prim.release(s.robot, cfg.grasp.open_width)
     if not r:
-        result.outcome = "release_failed"
-        return _abort(result, robot, cfg, retreat_q, r.reason, say)
-    r = prim.retreat(robot, retreat_q, cfg.retreat, approach, cfg.grasp.travel_speed)
+        return s.abort(r.outcome, r.reason)
+    r = prim.retreat(s.robot, s.retreat_q, cfg.retreat, s.approach, cfg.grasp.travel_speed)
     if not r:
-        result.outcome = "retreat_failed"
-        return _fail(result, r.reason, say)
-    still = clock.wait_still(cfg.retreat)
+        return s.fail(r.outcome, r.reason)
+    still = s.clock.wait_still(cfg.retreat)
     result.settle_speed, result.still = still.measure, still.still
     result.details["still"] = still.description
     if not still:
-        say(f"warning: the hoses are not still after {still.waited:.1f} s ({still.description})")
-    now = Tick(clock.now(), robot.ee_pose(), float(robot.gripper_opening), robot.joint_positions)
-    target = collector.capture_target(clock.grab, now)
+        s.say(f"warning: the hoses are not still after {still.waited:.1f} s ({still.description})")
+    robot = s.robot
+    now = Tick(s.clock.now(), robot.ee_pose(), float(robot.gripper_opening), robot.joint_positions)
+    target = collector.capture_target(s.clock.grab, now)
     result.timings["retreat"] = time.perf_counter() - t0
     if target.truth is not None:
         result.target_robot_pixels = int((target.truth.labels == LABEL_ROBOT).sum())
         if cfg.retreat.verify and result.target_robot_pixels:
-            result.outcome = "robot_in_view"
-            return _fail(
-                result,
-                f"the robot is visible in the target frame ({result.target_robot_pixels} pixels)",
-                say,
+            n = result.target_robot_pixels
+            return s.fail(
+                Outcome.ROBOT_IN_VIEW, f"the robot is visible in the target frame ({n} pixels)"
             )
+    return True
 
-    # 5. ground-truth flow from the target to each kept frame
-    if truth is not None:
-        say(f"target frame captured; ground-truth flow for {len(collector.frames) - 1} frames")
-    collector.finish(say)
-    result.stream = Stream(collector.frames, meta=_stream_meta(cfg, result, directions, T))
-    result.success, result.outcome = True, "ok"
-    total, cpu = time.perf_counter() - t_start, time.process_time() - c_start
+
+def finish(s: InteractionState) -> bool:
+    """Ground-truth flow from the target to each kept frame; the stream; the timings."""
+    result, collector = s.result, s.collector
+    assert collector is not None
+    if s.truth is not None:
+        s.say(f"target frame captured; ground-truth flow for {len(collector.frames) - 1} frames")
+    collector.finish(s.say)
+    result.stream = Stream(collector.frames, meta=_stream_meta(s))
+    result.success, result.outcome = True, Outcome.OK
+    total, cpu = time.perf_counter() - s.t_start, time.process_time() - s.c_start
     result.timings.update(
         total=total,
         rendering=collector.render_time,
@@ -382,58 +471,68 @@ def run_interaction(
     if collector.skews:
         result.details["skew_median_s"] = float(np.median(collector.skews))
         result.details["skew_max_s"] = float(np.max(collector.skews))
-    say(f"done in {total:.1f} s")
-    return result
+    s.say(f"done in {total:.1f} s")
+    return True
 
 
-def _act(robot: Robot, cfg: InteractionConfig, g1: Pose, u: np.ndarray) -> prim.PrimitiveResult:
-    a = cfg.actions
-    if cfg.kind == "grasp":
-        return prim.periodic_action(
-            robot, g1, u, a.amplitude, a.periods, a.speed, a.stroke_tolerance, a.min_stroke_coverage
-        )
-    return prim.push(robot, g1, u, cfg.push_depth, a.periods, a.speed, a.stroke_tolerance)
-
-
-def _stream_meta(
-    cfg: InteractionConfig,
-    result: InteractionResult,
-    directions: list[tuple[str, np.ndarray]],
-    T: np.ndarray,
-) -> dict[str, Any]:
+def _stream_meta(s: InteractionState) -> dict[str, Any]:
+    result = s.result
     return {
         "source": "cablesim",
-        "kind": cfg.kind,
+        "kind": s.cfg.kind,
         "hose": result.hose,
-        "action_labels": [d[0] for d in directions],
-        "action_directions_world": [[float(x) for x in d[1]] for d in directions],
+        "action_labels": [d[0] for d in s.directions],
+        "action_directions_world": [[float(x) for x in d[1]] for d in s.directions],
         "grasp_world": None if result.grasp is None else [float(x) for x in result.grasp.position],
-        "interaction": cfg.to_dict(),
-        "T_world_camera": T.tolist(),
+        "interaction": s.cfg.to_dict(),
+        "T_world_camera": s.T.tolist(),
     }
 
 
-def _fail(result: InteractionResult, reason: str, say: Say) -> InteractionResult:
-    result.success, result.reason, result.stream = False, reason, None
-    say(f"failed: {reason}")
-    return result
+#: The phases of an interaction, in order; each returns whether the interaction goes on.
+PHASES: tuple[Callable[[InteractionState], bool], ...] = (locate, grasp, act, retreat, finish)
 
 
-def _abort(
-    result: InteractionResult,
+# ---------------------------------------------------------------------- runner
+def run_interaction(
     robot: Robot,
-    cfg: InteractionConfig,
-    retreat_q: Sequence[float],
-    reason: str,
-    say: Say,
-    moved: bool = True,
+    camera: Camera,
+    clock: Clock,
+    segment: np.ndarray,
+    config: InteractionConfig | None = None,
+    truth: TruthProvider | None = None,
+    options: InteractionOptions | None = None,
 ) -> InteractionResult:
-    """Leave the scene clean (open, retreat) after a failure, then report it."""
-    if moved:
-        prim.release(robot, cfg.grasp.open_width)
-        r = prim.retreat(
-            robot, retreat_q, cfg.retreat, prim.DEFAULT_APPROACH, cfg.grasp.travel_speed
-        )
-        if not r:
-            reason += f"; retreat after the failure failed too ({r.reason})"
-    return _fail(result, reason, say)
+    """Grasp (or push) the hose at ``segment`` of the current image and act: the
+    :data:`PHASES` in turn until one fails (module docstring).
+
+    ``segment``: HxW bool mask or (N, 2) pixels (u, v) in the camera's current image.
+    ``truth``: a ground-truth provider (simulation, digital twin), used only when
+    ``config.capture.ground_truth``.  ``options``: the run-time companions
+    (:class:`InteractionOptions`: frame sink, progress, known hose, park pose, arm masks,
+    grasp-retry random stream).
+    """
+    state = InteractionState.begin(robot, camera, clock, segment, config, truth, options)
+    for phase in PHASES:
+        if not phase(state):
+            break
+    return state.result
+
+
+__all__ = [
+    "OUTCOMES",
+    "PHASES",
+    "ActionReport",
+    "InteractionOptions",
+    "InteractionResult",
+    "InteractionState",
+    "Outcome",
+    "act",
+    "finish",
+    "grasp",
+    "locate",
+    "retreat",
+    "run_interaction",
+    "segment_grasp_target",
+    "segment_mask",
+]

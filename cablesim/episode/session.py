@@ -15,7 +15,7 @@ import numpy as np
 
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.episode.config import InteractionConfig
-from cablesim.episode.runner import InteractionResult, run_interaction
+from cablesim.episode.runner import InteractionOptions, InteractionResult, run_interaction
 from cablesim.panda.description import PARK_QPOS
 from cablesim.progress import Say
 from cablesim.robot.base import Robot
@@ -65,19 +65,17 @@ class Session:
         say: Say | None = None,
     ) -> InteractionResult:
         """One interaction at ``segment`` of the current image (:func:`run_interaction`)."""
-        return run_interaction(
-            self.robot,
-            self.camera,
-            self.clock,
-            segment,
-            interaction or self.cfg.interaction,
-            truth=self.truth,
+        interaction = interaction or self.cfg.interaction
+        options = InteractionOptions(
             sink=sink,
             say=say,
             hose=self.hose,
             park=self.park,
-            arm_mask=self.arm_masker(interaction or self.cfg.interaction),
+            arm_mask=self.arm_masker(interaction),
             retry_rng=self.retry_rng,
+        )
+        return run_interaction(
+            self.robot, self.camera, self.clock, segment, interaction, self.truth, options
         )
 
     def arm_masker(self, interaction: InteractionConfig) -> Any:

@@ -3,7 +3,8 @@
 Conventions: poses are of the TCP (``grasp_site``, between the finger pads) in the world frame
 unless a name says ``camera``; the camera frame is OpenCV's (x right, y down, z forward) and is
 given by the 4x4 ``T_world_camera``.  Motions never raise for an unreachable target, a joint
-limit or a collision: they return a :class:`MoveResult` whose ``reason`` says what went wrong.
+limit or a collision: they return a :class:`MoveResult` whose ``reason`` says what went wrong and
+whose ``outcome`` names it where the robot can tell (:class:`~cablesim.outcomes.Outcome`).
 Each maps directly onto franky-control: ``move_to`` -> ``Robot.move(CartesianMotion(Affine))``
 with relative dynamics, ``grasp`` -> ``Gripper.grasp(width, speed, force)``, ``open`` ->
 ``Gripper.move(width, speed)``, ``recover`` -> ``Robot.recover_from_errors()``.
@@ -17,6 +18,7 @@ from typing import Literal
 
 import numpy as np
 
+from cablesim.outcomes import Outcome
 from cablesim.panda.description import HOME_QPOS
 from cablesim.robot.pose import Pose
 
@@ -25,12 +27,21 @@ Frame = Literal["world", "camera", "tcp"]
 
 @dataclass(frozen=True)
 class MoveResult:
-    """Outcome of a motion; truthy on success."""
+    """Outcome of a motion; truthy on success.
+
+    ``outcome`` names a failure where the robot tells it apart: ``Outcome.UNREACHABLE`` for a
+    motion its arm-model check refused before moving (IK, joint limits, a predicted
+    collision), ``Outcome.COLLISION`` for a motion stopped on a contact in the scene.  It is
+    None on success and for a failure the robot cannot name (a motion that ran and ended off
+    its target, a reflex of the real arm, a refused argument): the step that asked for the
+    motion names those (a grasp's approach: ``GRASP_NOT_HELD``, an action stroke:
+    ``ACTION_FAILED``, ...)."""
 
     success: bool
     reason: str = ""
     position_error: float = float("nan")  # m, TCP to target at the end
     duration: float = 0.0  # s of (simulated or real) robot time
+    outcome: Outcome | None = None
 
     def __bool__(self) -> bool:
         return self.success

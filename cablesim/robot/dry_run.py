@@ -8,7 +8,8 @@ Each motion is checked exactly as the real adapter checks it before moving (IK a
 straight TCP line for Cartesian motions, the joint path for joint motions, limits and
 collisions on the arm-only model of :mod:`cablesim.panda.ik`); a motion that passes updates
 the virtual state, one that fails returns the same ``MoveResult(False, reason)`` the real
-robot would.  The gripper succeeds at any width (nothing can be measured without moving).
+robot would (``outcome=Outcome.UNREACHABLE``).  The gripper succeeds at any width (nothing can
+be measured without moving).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.outcomes import Outcome
 from cablesim.panda.description import MAX_OPENING
 from cablesim.robot.base import MoveResult, Robot
 from cablesim.robot.pose import Pose
@@ -64,7 +66,7 @@ class DryRunRobot(Robot):
         plan, reason = self.arm.plan_line(self.ee_pose(), self._q, pose, self._opening)
         self.log.append(PlannedMotion("move_to", bool(plan), reason, pose.position.tolist()))
         if not plan:
-            return MoveResult(False, reason)
+            return MoveResult(False, reason, outcome=Outcome.UNREACHABLE)
         self._q = np.asarray(plan[-1], float)
         return MoveResult(True, "", float(np.linalg.norm(self.ee_pose().position - pose.position)))
 
@@ -73,7 +75,7 @@ class DryRunRobot(Robot):
         reason = self.arm.check_joint_path(self._q, q, self._opening)
         self.log.append(PlannedMotion("move_joints", not reason, reason, q.tolist()))
         if reason:
-            return MoveResult(False, reason)
+            return MoveResult(False, reason, outcome=Outcome.UNREACHABLE)
         self._q = q.copy()
         return MoveResult(True)
 

@@ -15,11 +15,12 @@ the base frame and Cartesian motions move the TCP along straight lines.
 Motions.  Before anything is sent, a Cartesian target is checked on the arm-only
 :class:`~cablesim.panda.ik.ArmModel` (the same kinematics, joint limits and static obstacles as
 the simulated robot): IK along the straight line, every waypoint within limits and free of
-collisions.  A target that fails this check returns ``MoveResult(False, reason)`` without
-moving.  A motion the robot aborts (franky's ``ControlException`` carrying a reflex, e.g. a
-collision or a joint limit; ``CommandException``; ``InvalidOperationException``) also returns
-``MoveResult(False, reason)``, after ``recover_from_errors()``.  Only a lost connection
-(``NetworkException``) raises.
+collisions.  A target that fails this check returns ``MoveResult(False, reason)`` with
+``outcome=Outcome.UNREACHABLE`` without moving.  A motion the robot aborts (franky's
+``ControlException`` carrying a reflex, e.g. a collision or a joint limit; ``CommandException``;
+``InvalidOperationException``) also returns ``MoveResult(False, reason)``, after
+``recover_from_errors()``, with no outcome of its own (the step that asked for it names it).
+Only a lost connection (``NetworkException``) raises.
 
 Speeds.  franky scales its velocity, acceleration and jerk limits by a relative dynamics
 factor.  ``move_to``'s ``speed`` and ``angular_speed`` become the velocity factor
@@ -44,6 +45,7 @@ import mujoco
 import numpy as np
 
 from cablesim.errors import ConfigError
+from cablesim.outcomes import Outcome
 from cablesim.panda.description import FLANGE_T_TCP, HAND_OFFSET, MAX_OPENING
 from cablesim.panda.ik import ArmModel, ArmModelChecks, Obstacle
 from cablesim.robot.base import Frame, MoveResult, Robot
@@ -266,7 +268,9 @@ class FrankyPanda(ArmModelChecks, Robot):
         if check:
             problem = self.check_line(pose)
             if problem:
-                return MoveResult(False, problem, self._pos_error(pose))
+                return MoveResult(
+                    False, problem, self._pos_error(pose), outcome=Outcome.UNREACHABLE
+                )
         fr = self._franky
         target = fr.Affine(self._T_base_world @ pose.matrix())
         motion = fr.CartesianMotion(
@@ -299,7 +303,9 @@ class FrankyPanda(ArmModelChecks, Robot):
         if check:
             problem = self.check_line(target)
             if problem:
-                return MoveResult(False, problem, self._pos_error(target))
+                return MoveResult(
+                    False, problem, self._pos_error(target), outcome=Outcome.UNREACHABLE
+                )
         fr = self._franky
         d_tcp = current.rotation.T @ d_world
         motion = fr.CartesianMotion(
@@ -317,11 +323,11 @@ class FrankyPanda(ArmModelChecks, Robot):
             return MoveResult(False, f"speed_factor must be in (0, 1], got {speed_factor}")
         problem = self.arm.limit_violation(q)
         if problem:
-            return MoveResult(False, f"joint limit: {problem}")
+            return MoveResult(False, f"joint limit: {problem}", outcome=Outcome.UNREACHABLE)
         if check:
             problem = self.arm.check_joint_path(self.joint_positions, q, self._opening_for_checks())
             if problem:
-                return MoveResult(False, problem)
+                return MoveResult(False, problem, outcome=Outcome.UNREACHABLE)
         fr = self._franky
         factor = fr.RelativeDynamicsFactor(
             min(speed_factor, 1.0), self.dynamics_factor, self.dynamics_factor

@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from cablesim.outcomes import Outcome, worst
 from cablesim.panda.description import MAX_OPENING, RETRACT_QPOS
 from cablesim.robot.base import MoveResult, Robot
 from cablesim.robot.pose import Pose
@@ -41,13 +42,18 @@ def avoiding_hoses(robot: Robot) -> Iterator[None]:
 
 
 def move_joints_safely(robot: Robot, q, speed_factor: float = 0.3) -> MoveResult:
-    """Joint move; if the direct path is blocked, go through the retract configuration."""
+    """Joint move; if the direct path is blocked, go through the retract configuration.  When
+    the way round fails too, the result names the worse of the two outcomes."""
     res = robot.move_joints(q, speed_factor)
     if res or not res.reason.startswith("collision"):
         return res
     via = robot.move_joints(RETRACT_QPOS, speed_factor)
     if not via:
-        return MoveResult(False, f"direct path blocked ({res.reason}); via retract: {via.reason}")
+        return MoveResult(
+            False,
+            f"direct path blocked ({res.reason}); via retract: {via.reason}",
+            outcome=worst(res.outcome, via.outcome),
+        )
     return robot.move_joints(q, speed_factor)
 
 
@@ -64,17 +70,20 @@ def approach_and_grasp(
     for pose, what in ((grasp, "grasp"), (pre, "pre-grasp")):
         ok, reason = robot.check_reachable(pose)
         if not ok:
-            return MoveResult(False, f"{what} pose unreachable: {reason}"), False
+            return MoveResult(
+                False, f"{what} pose unreachable: {reason}", outcome=Outcome.UNREACHABLE
+            ), False
     q_pre = robot.solve_ik(pre)
     if q_pre is None:
-        return MoveResult(False, "pre-grasp pose unreachable"), False
+        return MoveResult(False, "pre-grasp pose unreachable", outcome=Outcome.UNREACHABLE), False
     if robot.gripper_opening < MAX_OPENING - 0.005:
         robot.open()
     # Through the retract configuration (hand down, pulled back): a direct joint move from
     # wherever the arm is may sweep through hoses, which the arm-only checks cannot see.
     res = move_joints_safely(robot, RETRACT_QPOS)
     if not res:
-        return MoveResult(False, f"could not retract before the approach: {res.reason}"), False
+        why = f"could not retract before the approach: {res.reason}"
+        return MoveResult(False, why, outcome=res.outcome), False
     res = robot.move_joints(q_pre)
     if not res:
         return res, False

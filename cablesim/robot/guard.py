@@ -4,8 +4,9 @@
     robot.move_to(pose, speed=0.5)       # capped at SafetyConfig.max_speed; refused outside
 
 A Cartesian target outside the box (world frame, TCP position) is refused before anything
-moves (``MoveResult(False, "outside the workspace ...")``), and so is a joint target whose TCP
-leaves the box anywhere along the joint path (checked on the arm model, every 0.05 rad).  Speeds
+moves (``MoveResult(False, "outside the workspace ...", outcome=Outcome.UNREACHABLE)``), and so
+is a joint target whose TCP leaves the box anywhere along the joint path (checked on the arm
+model, every 0.05 rad).  Speeds
 above the caps are lowered to them.  Everything else is delegated unchanged, so the guard works
 the same around the simulated and the real arm.
 """
@@ -20,6 +21,7 @@ import numpy as np
 
 from cablesim.config import check_positive
 from cablesim.errors import ConfigError
+from cablesim.outcomes import Outcome
 from cablesim.robot.base import Frame, MoveResult, Robot
 from cablesim.robot.pose import Pose
 
@@ -87,7 +89,9 @@ class GuardedRobot(Robot):
     # ---- motion --------------------------------------------------------------------------
     def move_to(self, pose: Pose, speed: float = 0.1, angular_speed: float = 0.8) -> MoveResult:
         if not self.safety.contains(pose.position):
-            return MoveResult(False, self.safety.describe(pose.position))
+            return MoveResult(
+                False, self.safety.describe(pose.position), outcome=Outcome.UNREACHABLE
+            )
         return self.robot.move_to(
             pose,
             speed=min(speed, self.safety.max_speed),
@@ -103,7 +107,7 @@ class GuardedRobot(Robot):
         q = np.asarray(q, dtype=float).reshape(7)
         problem = self.joint_path_problem(q)
         if problem:
-            return MoveResult(False, problem)
+            return MoveResult(False, problem, outcome=Outcome.UNREACHABLE)
         return self.robot.move_joints(q, min(speed_factor, self.safety.max_joint_speed_factor))
 
     def joint_path_problem(self, q: np.ndarray, step: float = 0.05) -> str:

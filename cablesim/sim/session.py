@@ -68,6 +68,7 @@ from cablesim.errors import (
     SceneError,
     SceneUnsettledError,
 )
+from cablesim.outcomes import Outcome
 from cablesim.progress import Progress, Say, quiet
 from cablesim.seeding import stream
 from cablesim.sim.config import EpisodeConfig
@@ -307,7 +308,7 @@ def _interact(session: SimSession, mask: Any, say: Say, sink: Any = None) -> Int
         return session.interact(mask, sink=sink, say=say)
     except PhysicsDivergedError as e:
         say(f"interaction stopped: diverged: {e}")
-        return InteractionResult(False, reason=str(e), outcome="diverged", hose=session.hose)
+        return InteractionResult(False, reason=str(e), outcome=Outcome.DIVERGED, hose=session.hose)
 
 
 def choose_start(

@@ -4,7 +4,9 @@ A Cartesian move is planned first (IK along the straight line, every waypoint ch
 limits and collisions on the arm-only model with the static obstacles) and executed only if the
 plan is valid; execution streams interpolated joint targets to the position actuators with a
 minimum-jerk time law, watches the scene's contacts between robot and static geoms, and then
-waits for the TCP to settle.  Nothing here raises for an unreachable target or a collision.
+waits for the TCP to settle.  Nothing here raises for an unreachable target or a collision: a
+plan the arm model refuses is ``MoveResult(False, reason, outcome=Outcome.UNREACHABLE)``, a motion
+stopped on a robot/static contact (or ending off its target on one) ``Outcome.COLLISION``.
 
 Grasping: ``grasp_mode="friction"`` (default) closes the real finger joints on the hose and
 relies on pad friction.  ``grasp_mode="equality"`` is an explicitly chosen fallback that also
@@ -24,6 +26,7 @@ import mujoco
 import numpy as np
 
 from cablesim.errors import ConfigError
+from cablesim.outcomes import Outcome
 from cablesim.panda.description import JOINT_LIMITS, JOINT_VELOCITY_LIMITS, MAX_OPENING
 from cablesim.panda.ik import ArmModel, ArmModelChecks, Obstacle, static_obstacles
 from cablesim.panda.model import (
@@ -223,7 +226,7 @@ class SimPanda(ArmModelChecks, Robot):
             return MoveResult(False, "speed must be > 0")
         plan, reason = self.plan_line(pose)  # straight lines do not see the hoses (ArmModel)
         if not plan:
-            return MoveResult(False, reason, self._pos_error(pose))
+            return MoveResult(False, reason, self._pos_error(pose), outcome=Outcome.UNREACHABLE)
         dist, angle = self.ee_pose().distance_to(pose)
         duration = max(1.875 * dist / speed, 1.875 * angle / angular_speed, 0.02)
         self.last_plan = plan
@@ -237,7 +240,7 @@ class SimPanda(ArmModelChecks, Robot):
         with self._executing():
             problem = self.arm.check_joint_path(q0, q, self.gripper_opening)
         if problem:
-            return MoveResult(False, problem)
+            return MoveResult(False, problem, outcome=Outcome.UNREACHABLE)
         n = max(1, math.ceil(np.max(np.abs(q - q0)) / 0.05))
         plan = [q0 + (q - q0) * i / n for i in range(n + 1)]
         duration = max(
@@ -261,7 +264,11 @@ class SimPanda(ArmModelChecks, Robot):
                 if hit:
                     d.ctrl[self._act] = self.joint_positions  # stop where we are
                     return MoveResult(
-                        False, f"collision in scene: {hit}", self._pos_error(target), t
+                        False,
+                        f"collision in scene: {hit}",
+                        self._pos_error(target),
+                        t,
+                        Outcome.COLLISION,
                     )
         d.ctrl[self._act] = plan[-1]
         for _ in range(max(1, math.ceil(cfg.settle_time / dt))):
@@ -280,6 +287,7 @@ class SimPanda(ArmModelChecks, Robot):
             + (f"; contact: {hit}" if hit else ""),
             pos_err,
             t,
+            Outcome.COLLISION if hit else None,
         )
 
     def _static_collision(self) -> str:

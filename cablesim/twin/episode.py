@@ -206,7 +206,7 @@ def twin_episode(
     statistics every so many seconds while it follows.  ``drain``: how long the clock waits
     after an action for the frames the twin rendered of it (the twin may lag)."""
     from cablesim.episode.clock import StreamClock
-    from cablesim.episode.runner import run_interaction
+    from cablesim.episode.runner import InteractionOptions, run_interaction
     from cablesim.policies.explore import grasp_reachability
     from cablesim.robot.franky_panda import FrankyPanda
     from cablesim.twin.realsense import SoftwareRealSense
@@ -255,9 +255,7 @@ def twin_episode(
             picked.mask,
             cfg.interaction,
             truth=truth,
-            say=say,
-            hose=hose,
-            park=twin.park,
+            options=InteractionOptions(say=say, hose=hose, park=twin.park),
         )
         timings["interaction"] = time.perf_counter() - t1
         twin.pause()

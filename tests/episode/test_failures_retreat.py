@@ -75,6 +75,26 @@ def test_unreachable_segment_episode_fails_with_reason(scene):
     assert world.time == t_sim
 
 
+def test_the_simulated_panda_names_what_its_arm_model_refuses(scene):
+    """A refused plan is ``unreachable`` where it is detected, before anything moves; a refused
+    argument names no outcome (the step that asked for the motion names it)."""
+    from cablesim.outcomes import Outcome
+
+    _, session = scene
+    world, robot = session.world, session.robot
+    t_sim = world.time
+    far = robot.ee_pose().translated(np.array([0.0, 0.0, 1.5]))  # far above the arm's reach
+    r = robot.move_to(far)
+    assert not r and r.outcome is Outcome.UNREACHABLE, r.reason
+    q = robot.joint_positions
+    q[0] = 5.0  # past joint 1's limit
+    r = robot.move_joints(q)
+    assert not r and r.outcome is Outcome.UNREACHABLE and r.reason.startswith("joint limit")
+    r = robot.move_to(far, speed=0.0)
+    assert not r and r.outcome is None
+    assert world.time == t_sim
+
+
 def test_segment_input_errors_come_back_as_failures(scene):
     _, session = scene
     res = session.interact(np.zeros((120, 160), bool))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from cablesim.episode.clock import PlanningClock
-from cablesim.episode.runner import run_interaction
+from cablesim.episode.runner import InteractionOptions, run_interaction
 from cablesim.errors import ConfigError
 from cablesim.robot.dry_run import DryRunRobot
 from cablesim.robot.guard import GuardedRobot, SafetyConfig
@@ -80,7 +80,7 @@ def test_dry_run_plans_a_whole_interaction_without_moving(session):
         PlanningClock(session.camera),
         segment.mask,
         CFG.interaction,
-        park=session.park,
+        options=InteractionOptions(park=session.park),
     )
     assert result.success, result.reason
     assert session.world.time == t and np.array_equal(session.robot.joint_positions, q)
