@@ -26,9 +26,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from cablesim.config import Config, check_int, moved_fields
-from cablesim.errors import ConfigError
+from cablesim.errors import ConfigError, InputError
 from cablesim.perception.correlation import CorrelationParams
+from cablesim.perception.flow import check_flow
 from cablesim.perception.grasp_sampler import GraspSamplerParams
+from cablesim.perception.methods import check_method
 from cablesim.perception.refine import DEFAULT_REFINE, GrowParams, RefineParams
 from cablesim.perception.segmentation import SegmentationParams
 from cablesim.sim.config import EPISODE_SHORTCUTS, EpisodeConfig
@@ -124,10 +126,13 @@ class ExploreConfig(Config):
     def _validate(self) -> None:
         if self.strategy not in STRATEGIES:
             raise ConfigError("strategy", f"must be one of {STRATEGIES}, got {self.strategy!r}")
-        if self.method not in (None, "correlation", "segmentation", "ablation"):
-            raise ConfigError("method", f"unknown method {self.method!r}")
-        if self.flow not in FLOWS:
-            raise ConfigError("flow", f"must be one of {FLOWS}, got {self.flow!r}")
+        for name, check in (("method", check_method), ("flow", check_flow)):
+            value = getattr(self, name)
+            try:  # a registered name (built-in or plug-in) or MODULE:CLASS
+                if value is not None:
+                    check(value)
+            except InputError as e:
+                raise ConfigError(name, str(e)) from None
         if self.merge not in MERGES:
             raise ConfigError("merge", f"must be one of {MERGES}, got {self.merge!r}")
         if not isinstance(self.grasps, int) or self.grasps < 1:

@@ -523,7 +523,9 @@ def _method_params(cfg: ExploreConfig) -> Any:
         from cablesim.perception.correlation import AblationParams
 
         return AblationParams()
-    return cfg.correlation
+    if method == "correlation":
+        return cfg.correlation
+    return None  # any other method: its own defaults
 
 
 def explore(

@@ -5,7 +5,9 @@
 
 1. Interactions (tables 6.4/6.5): every validation and test scene, with and without the
    neighbour perturbation, one grasp and two actions; for each flow back end the three methods'
-   confusion counts over their threshold grids (:mod:`cablesim.benchmark.scene`).  Thresholds
+   confusion counts over their threshold grids (:mod:`cablesim.benchmark.scene`).  ``flows``
+   and ``methods`` take any spec of the registries (a plug-in's name or ``MODULE:CLASS``,
+   ``docs/plugins.md``): a user's flow back end or method gets its own rows.  Thresholds
    are tuned per beta on validation and scored on test (SPEC section 7).
 2. Explorations (tables 6.8/6.9): two grasps on each test scene with motion correlation at the
    thresholds tuned for beta 0.4 (or the thesis's), grades of every proposal, scores of one and
@@ -33,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from cablesim.benchmark import report as rp
-from cablesim.benchmark.config import SceneSize, ThesisConfig
+from cablesim.benchmark.config import METHODS, SceneSize, ThesisConfig
 from cablesim.files import OutputLock, write_text
 from cablesim.jobs import Summary, execute, load_results, ray_init, ray_shutdown
 from cablesim.jsonutil import json_default
@@ -97,7 +99,7 @@ def _run_thesis(
         say(summaries["interactions"].report())
         records = load_results(results, jobs)
         rows = rp.segmentation_rows(
-            records, cfg.flows, cfg.perturb, cfg.betas, cfg.action_thresholds
+            records, cfg.flows, cfg.perturb, cfg.betas, cfg.action_thresholds, cfg.methods
         )
         doc: dict[str, Any] = {
             "config": cfg.to_dict(),
@@ -175,6 +177,11 @@ def write_report(
         f"{', '.join('on' if p else 'off' for p in cfg.perturb)}; thresholds tuned per beta on "
         "validation (mean F_beta over scenes, NaN-free), reported on test; undefined precision "
         "(empty prediction) left out of the means, as published",
+        *(
+            [f"- methods: {', '.join(f'`{m}`' for m in cfg.methods)}"]
+            if tuple(cfg.methods) != METHODS
+            else []
+        ),
         f"- run: {cfg.workers} workers, ray {cfg.ray}; {doc['wall_s']:.0f} s for this call",
         "",
         "## Jobs",

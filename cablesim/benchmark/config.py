@@ -22,14 +22,37 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from cablesim.config import Config, to_dict
-from cablesim.errors import ConfigError
+from cablesim.errors import ConfigError, InputError
 from cablesim.jobs import Job
+from cablesim.perception.flow import FLOW_BACKENDS
+from cablesim.perception.methods import SEGMENTATION_METHODS
 from cablesim.perception.metrics import BETAS
 
+#: the flow back ends the thesis's tables were made with (any spec of
+#: :data:`~cablesim.perception.flow.FLOW_BACKENDS` may be given: a plug-in's name, or
+#: ``MODULE:CLASS``; its rows are named after the spec)
 FLOWS = ("oracle", "dis", "farneback")
+#: the thesis's methods (tables 6.3-6.5); a user's method is added by its spec
 METHODS = ("segmentation", "ablation", "correlation")
+#: the published code's Farneback (``cablesim.formats.movingcables``) beside the registry's
+CLIP_ONLY_FLOWS = ("farneback-movingcables",)
 CLIP_FLOWS = ("farneback-movingcables", "farneback", "dis")
 SPLITS = ("validation", "test")
+
+
+def _check_specs(field_name: str, specs: tuple[str, ...], registry, extra=()) -> None:
+    """``ConfigError`` naming the field unless every spec builds (all its required
+    parameters given) and none repeats."""
+    for spec in specs:
+        if spec in extra:
+            continue
+        try:
+            registry.check(spec, complete=True)
+        except InputError as e:
+            raise ConfigError(field_name, str(e)) from None
+    seen = [s for i, s in enumerate(specs) if s in specs[:i]]
+    if seen:
+        raise ConfigError(field_name, f"{seen[0]!r} is given twice")
 
 
 @dataclass(frozen=True)
@@ -58,6 +81,7 @@ class ThesisConfig(Config):
     validation: tuple[int, int] = (1000, 1050)  # seeds [A, B)
     test: tuple[int, int] = (2000, 2200)
     flows: tuple[str, ...] = ("oracle", "dis")  # ground truth and the default CPU flow
+    methods: tuple[str, ...] = METHODS  # a user's method: its spec (MODULE:CLASS, a plug-in)
     perturb: tuple[bool, ...] = (True, False)  # neighbour perturbation on / off
     betas: tuple[float, ...] = BETAS
     action_thresholds: tuple[int, ...] = (1, 2)  # union (table 6.4), intersection (6.5)
@@ -96,14 +120,14 @@ class ThesisConfig(Config):
             ra, rb = ranges[a], ranges[b]
             if ra[0] < rb[1] and rb[0] < ra[1]:
                 raise ConfigError(b, f"the {b} seeds {rb} overlap the {a} seeds {ra}")
-        for f in (*self.flows, self.explore_flow):
-            if f not in FLOWS:
-                raise ConfigError("flows", f"unknown flow {f!r}; choose from {FLOWS}")
-        for f in self.clip_flows:
-            if f not in CLIP_FLOWS:
-                raise ConfigError("clip_flows", f"unknown flow {f!r}; choose from {CLIP_FLOWS}")
         if not self.flows or not self.perturb:
             raise ConfigError("flows", "need at least one flow and one perturbation setting")
+        _check_specs("flows", tuple(self.flows), FLOW_BACKENDS)
+        _check_specs("explore_flow", (self.explore_flow,), FLOW_BACKENDS)
+        _check_specs("clip_flows", tuple(self.clip_flows), FLOW_BACKENDS, CLIP_ONLY_FLOWS)
+        if not self.methods:
+            raise ConfigError("methods", "need at least one method (e.g. correlation)")
+        _check_specs("methods", tuple(self.methods), SEGMENTATION_METHODS)
         for b in self.betas:
             if b not in BETAS:
                 raise ConfigError("betas", f"{b} is not one of {BETAS}")
@@ -111,7 +135,21 @@ class ThesisConfig(Config):
             raise ConfigError("action_thresholds", "each must be 1 (union) or 2 (intersection)")
         if self.explore_thresholds not in ("tuned", "thesis"):
             raise ConfigError("explore_thresholds", "must be 'tuned' or 'thesis'")
-        if self.explore_thresholds == "tuned" and self.explore_flow not in self.flows:
+        if (
+            self.explore
+            and self.explore_thresholds == "tuned"
+            and "correlation" not in self.methods
+        ):
+            raise ConfigError(
+                "methods",
+                "the explorations' thresholds are tuned for motion correlation: keep "
+                "'correlation' among the methods or set explore_thresholds 'thesis'",
+            )
+        if (
+            self.explore
+            and self.explore_thresholds == "tuned"
+            and self.explore_flow not in self.flows
+        ):
             raise ConfigError(
                 "explore_flow",
                 f"thresholds for {self.explore_flow!r} are tuned only if it is "
@@ -149,6 +187,8 @@ class ThesisConfig(Config):
                         "flows": list(self.flows),
                         "cache_streams": self.cache_streams,
                     }
+                    if tuple(self.methods) != METHODS:  # the thesis's jobs keep their keys
+                        params["methods"] = list(self.methods)
                     key = f"interaction-{_digest(params)}-s{seed:06d}-p{int(p)}"
                     jobs.append(Job("thesis.interaction", key, params))
         return jobs

@@ -18,6 +18,20 @@ from cablesim.perception.tuning import ThresholdCounts, tune_counts
 
 METHODS = ("segmentation", "ablation", "correlation")
 N_NAME = {1: "union", 2: "intersection"}
+COLOURS = {"segmentation": "tab:orange", "ablation": "tab:green", "correlation": "tab:blue"}
+OTHER_COLOURS = ("tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
+
+
+def method_name(method: str) -> str:
+    """A method's name in the tables: the thesis's for its own, else the spec itself."""
+    return ref.METHOD_NAMES.get(method, method)
+
+
+def _colour(method: str, methods: Sequence[str]) -> str:
+    if method in COLOURS:
+        return COLOURS[method]
+    others = [m for m in methods if m not in COLOURS]
+    return OTHER_COLOURS[others.index(method) % len(OTHER_COLOURS)]
 
 
 def _f(v: Any) -> float:
@@ -47,7 +61,7 @@ def _counts(
     return [
         ThresholdCounts.from_dict(r["result"]["flows"][flow]["counts"][method][str(n)])
         for r in records
-        if flow in r["result"]["flows"]
+        if flow in r["result"]["flows"] and method in r["result"]["flows"][flow]["counts"]
     ]
 
 
@@ -57,6 +71,7 @@ def segmentation_rows(
     perturbs: Sequence[bool],
     betas: Sequence[float],
     ns: Sequence[int] = (1, 2),
+    methods: Sequence[str] = METHODS,
 ) -> list[dict[str, Any]]:
     """One row per flow, perturbation, action threshold, method and beta: thresholds tuned on
     the validation scenes, the means over the test scenes at them, and the per-scene values."""
@@ -66,7 +81,7 @@ def segmentation_rows(
             val = _ok(records, split="validation", perturb=p)
             test = _ok(records, split="test", perturb=p)
             for n in ns:
-                for method in METHODS:
+                for method in methods:
                     cv = _counts(val, flow, method, n)
                     ct = _counts(test, flow, method, n)
                     for beta in betas:
@@ -111,6 +126,8 @@ def thesis_threshold_rows(
             if not test:
                 continue
             for method in ("segmentation", "correlation"):
+                if not all(method in r["result"]["flows"][flow]["thesis_thresholds"] for r in test):
+                    continue  # not among the benchmark's methods
                 for beta in ("1", "0.5", "0.4", "0.3", "0.2", "0.1"):
                     for n in ("1", "2"):
                         s = [
@@ -168,7 +185,7 @@ def segmentation_markdown(rows: list[dict[str, Any]]) -> list[str]:
                 t = _reference_row(r["method"], beta, n)
                 th = [_fmt(x, 4) for x in t] if t else ["-"] * 4
                 lines.append(
-                    f"| {ref.METHOD_NAMES[r['method']]} | {beta:g} | {_params_text(r.get('params'))} "
+                    f"| {method_name(r['method'])} | {beta:g} | {_params_text(r.get('params'))} "
                     f"| {_fmt(r.get('recall'))} | {_fmt(r.get('precision'))} | {_fmt(r.get('f'))} "
                     f"| {_fmt(r.get('iou'))} | {' | '.join(th)} |"
                 )
@@ -188,7 +205,7 @@ def thesis_thresholds_markdown(rows: list[dict[str, Any]]) -> list[str]:
     for r in rows:
         lines.append(
             f"| {r['flow']} | {'perturbed' if r['perturb'] else 'still'} "
-            f"| {ref.METHOD_NAMES[r['method']]} | {r['beta']:g} | {N_NAME[r['n']]} "
+            f"| {method_name(r['method'])} | {r['beta']:g} | {N_NAME[r['n']]} "
             f"| {_fmt(r['recall'])} | {_fmt(r['precision'])} | {_fmt(r['f'])} | {_fmt(r['iou'])} |"
         )
     return [*lines, ""]
@@ -336,10 +353,11 @@ def plot_pr_curves(
     if not keys:
         return None
     fig, axes = plt.subplots(1, len(keys), figsize=(5 * len(keys), 4.6), squeeze=False)
-    colours = {"segmentation": "tab:orange", "ablation": "tab:green", "correlation": "tab:blue"}
+    methods = list(dict.fromkeys(r["method"] for r in rows))
     for ax, (flow, p) in zip(axes[0], keys, strict=True):
         test = [r for r in _ok(records, split="test", perturb=p) if flow in r["result"]["flows"]]
-        for method in METHODS:
+        for method in methods:
+            colour = _colour(method, methods)
             tuned = [
                 r
                 for r in rows
@@ -360,16 +378,16 @@ def plot_pr_curves(
             with np.errstate(all="ignore"):
                 mp = np.array([nanmean(P[:, j]) for j in range(P.shape[1])])
                 mr = np.array([nanmean(R[:, j]) for j in range(R.shape[1])])
-            ax.plot(mr, mp, "-", color=colours[method], label=ref.METHOD_NAMES[method])
+            ax.plot(mr, mp, "-", color=colour, label=method_name(method))
             ax.plot(
                 [tuned[0].get("recall", np.nan)],
                 [tuned[0].get("precision", np.nan)],
                 "o",
-                color=colours[method],
+                color=colour,
             )
             th = ref.TABLE_6_4.get((method, 0.4))
             if th:
-                ax.plot([th[0]], [th[1]], "*", ms=12, color=colours[method], mec="k")
+                ax.plot([th[0]], [th[1]], "*", ms=12, color=colour, mec="k")
         ax.set_title(
             f"flow {flow}, neighbours {'perturbed' if p else 'still'}\n({len(test)} test scenes, union)"
         )
@@ -388,6 +406,13 @@ def plot_pr_curves(
     return path
 
 
+def _short(spec: str) -> str:
+    """A box label: a built-in method's first four letters, a spec's class name."""
+    if spec in COLOURS:
+        return spec[:4]
+    return spec.split(",")[0].split(":")[-1][:14]
+
+
 def plot_distributions(rows: list[dict[str, Any]], path: Path, beta: float = 0.4) -> Path | None:
     """Per-scene F_beta, precision and recall on the test scenes at the thresholds tuned for
     ``beta`` (union): one box per method and setting."""
@@ -402,7 +427,8 @@ def plot_distributions(rows: list[dict[str, Any]], path: Path, beta: float = 0.4
     metrics = ("f", "precision", "recall")
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
     labels = [
-        f"{r['method'][:4]}\n{r['flow']}\n{'pert.' if r['perturb'] else 'still'}" for r in sel
+        f"{_short(r['method'])}\n{_short(r['flow'])}\n{'pert.' if r['perturb'] else 'still'}"
+        for r in sel
     ]
     for ax, k in zip(axes, metrics, strict=True):
         data = [[x for x in r["per_scene"][k] if x is not None] for r in sel]

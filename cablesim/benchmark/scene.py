@@ -2,8 +2,9 @@
 
 - :func:`run_interaction`: one grasp interaction (two actions) of a scene, simulated once (the
   stream is recorded to the cache and replayed when the job runs again), then for every flow
-  back end the statistics of all three methods and their confusion counts over the threshold
-  grids, for the union and the intersection of the two actions
+  back end the statistics of every method (the thesis's three unless the job names others:
+  any spec of :data:`~cablesim.perception.methods.SEGMENTATION_METHODS`) and their confusion
+  counts over the threshold grids, for the union and the intersection of the two actions
   (:class:`~cablesim.perception.tuning.ThresholdCounts`): the tuning on validation and the
   scores on test are computed later from these counts alone.
 - :func:`run_exploration`: two grasps (grasp sampler on the merged votes): the grades of every
@@ -28,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.benchmark.config import METHODS
 from cablesim.dataset.generate import failure, outcome_of, scene_from
 from cablesim.errors import CablesimError
 from cablesim.errors import outcome_of as error_outcome
@@ -200,15 +202,17 @@ def run_interaction(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
         "flows": {},
     }
     timings = {"simulate_s": t_sim}
+    methods = tuple(params.get("methods", METHODS))
     for flow in params["flows"]:
         t1 = time.perf_counter()
-        stats = compute_statistics(stream, flow, methods=("correlation", "segmentation"))
+        stats = compute_statistics(stream, flow, methods=methods)
         per: dict[str, Any] = {"counts": {}, "thesis_thresholds": {}, "samples": stats.n_samples}
-        for method in ("segmentation", "ablation", "correlation"):
+        for method in methods:
             per["counts"][method] = {
                 str(n): threshold_counts(stats, truth, method, n).to_dict() for n in (1, 2)
             }
-        for method in ("segmentation", "correlation"):  # the thesis's table 6.3 / SPEC 8
+        # the thesis's table 6.3 / SPEC 8: its own thresholds, for the methods it has them for
+        for method in (m for m in ("segmentation", "correlation") if m in methods):
             rows = {}
             for beta in (1.0, 0.5, 0.4, 0.3, 0.2, 0.1):
                 masks = masks_from_statistics(stats, method, params_for_beta(method, beta))
@@ -279,6 +283,7 @@ def run_exploration(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------- chapter 5
 def clip_flow(name: str) -> Any:
+    """The published code's Farneback, or any flow back end's spec."""
     from cablesim.formats.movingcables import PublishedFarneback
     from cablesim.perception.flow import make_flow
 

@@ -4,7 +4,9 @@ validation and test scenes (thresholds tuned per beta on validation, reported on
 ground-truth and DIS flow, with and without the neighbour perturbation (tables 6.3-6.5); grasp
 proposal grades and one against two grasps (tables 6.8, 6.9); one moving hose scored with the
 MovingCables protocol (chapter 5).  The thesis's real-robot numbers stand beside ours in every
-table.
+table.  --flows, --methods and --clip-flows take a user's flow back end or segmentation method
+too (an installed plug-in's name, or MODULE:CLASS on the Python path; see docs/plugins.md):
+its rows are named after it.
 
 Files in --out: report.md, report.json, pr_curves.png, distributions.png, clip_taus.png,
 config.json, results/<job>.json (one per scene; existing ones are skipped, so an interrupted run
@@ -37,7 +39,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
     p.add_argument("--validation", help="validation seeds A:B (default 1000:1050)")
     p.add_argument("--test", help="test seeds A:B (default 2000:2200)")
-    p.add_argument("--flows", nargs="+", help="flow back ends (default oracle dis)")
+    p.add_argument(
+        "--flows",
+        nargs="+",
+        metavar="FLOW",
+        help="flow back ends (default oracle dis): built-in names, installed plug-ins or "
+        "MODULE:CLASS[,KEY=VALUE...]",
+    )
+    p.add_argument(
+        "--methods",
+        nargs="+",
+        metavar="METHOD",
+        help="segmentation methods (default segmentation ablation correlation); add your own "
+        "by name or MODULE:CLASS[,KEY=VALUE...]",
+    )
+    p.add_argument(
+        "--clip-flows",
+        nargs="+",
+        metavar="FLOW",
+        help="flow back ends of chapter 5 (default farneback-movingcables farneback dis)",
+    )
     p.add_argument(
         "--perturb", nargs="+", choices=["on", "off"], help="neighbour perturbation settings"
     )
@@ -75,6 +96,10 @@ def config_from_args(args: argparse.Namespace):
             values[name] = parse_range(v, "--" + name.replace("_", "-"))
     if args.flows:
         values["flows"] = tuple(args.flows)
+    if args.methods:
+        values["methods"] = tuple(args.methods)
+    if args.clip_flows:
+        values["clip_flows"] = tuple(args.clip_flows)
     if args.perturb:
         values["perturb"] = tuple(dict.fromkeys(x == "on" for x in args.perturb))
     if args.no_explore:

@@ -42,7 +42,10 @@ from cablesim.commands._args import (
     write_config,
 )
 from cablesim.errors import InputError
-from cablesim.policies.config import FLOWS, MERGES, STRATEGIES, ExploreConfig
+from cablesim.perception.flow import FLOW_BACKENDS
+from cablesim.perception.methods import CURRENT_METHODS
+from cablesim.perception.registry import parse_spec
+from cablesim.policies.config import MERGES, STRATEGIES, ExploreConfig
 from cablesim.robot.guard import SafetyConfig
 
 
@@ -56,11 +59,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--method",
-        choices=("correlation", "segmentation", "ablation"),
         default=None,
-        help="segmentation method (default: correlation; segmentation for --strategy push)",
+        metavar="METHOD",
+        help=f"segmentation method: {', '.join(CURRENT_METHODS)}, an installed plug-in or "
+        "MODULE:CLASS[,KEY=VALUE...] (default: correlation; segmentation for --strategy push)",
     )
-    p.add_argument("--flow", choices=FLOWS, default=None, help="optical flow back end (dis)")
+    p.add_argument(
+        "--flow",
+        default=None,
+        metavar="FLOW",
+        help=f"optical flow back end: {', '.join(FLOW_BACKENDS.builtins())}, an installed "
+        "plug-in or MODULE:CLASS[,KEY=VALUE...] (default dis)",
+    )
     p.add_argument("--raft-checkpoint", type=Path, default=None, help="weights for --flow raft")
     p.add_argument(
         "--merge",
@@ -114,7 +124,8 @@ def config_from_args(args: argparse.Namespace) -> ExploreConfig:
 
 
 def _flow_kwargs(cfg: ExploreConfig, args: argparse.Namespace) -> dict | None:
-    if cfg.flow != "raft":
+    spec = parse_spec(cfg.flow, "flow back end")
+    if spec.target != "raft" or ("checkpoint" in spec.params and args.raft_checkpoint is None):
         return None
     if args.raft_checkpoint is None:
         raise InputError("--flow raft needs --raft-checkpoint (no weights are downloaded)")

@@ -37,30 +37,33 @@ import numpy as np
 from cablesim.commands._args import add_grow_colour_argument
 from cablesim.errors import InputError, RecordingError
 from cablesim.jsonutil import json_default
+from cablesim.perception.flow import FLOW_BACKENDS, check_flow, make_flow
 from cablesim.perception.frames import Stream
+from cablesim.perception.methods import METHODS, check_method, make_method
 from cablesim.perception.metrics import BETAS, score_mask
-from cablesim.perception.pipeline import (
-    METHODS,
-    PUBLISHED_METHODS,
-    params_for_beta,
-    segment_stream,
-)
+from cablesim.perception.pipeline import params_for_beta, segment_stream
 from cablesim.perception.published import PUBLISHED_THRESHOLDS
 from cablesim.perception.refine import DEFAULT_REFINE, GrowParams, RefineParams
+from cablesim.perception.registry import parse_spec
 from cablesim.viz import colour_map, hstack, label, overlay_votes, write_png
-
-FLOWS = ("dis", "farneback", "raft", "oracle")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("sequence", type=Path, help="recording folder or RealSense .db3 file")
     p.add_argument("--out", type=Path, required=True, help="output directory")
-    p.add_argument("--flow", choices=FLOWS, default="dis", help="flow back end (default dis)")
+    p.add_argument(
+        "--flow",
+        default="dis",
+        metavar="FLOW",
+        help=f"flow back end: {', '.join(FLOW_BACKENDS.builtins())}, an installed plug-in or "
+        "MODULE:CLASS[,KEY=VALUE...] (default dis)",
+    )
     p.add_argument(
         "--method",
-        choices=METHODS,
         default="correlation",
-        help="perception method (default correlation; 'published' = the published code)",
+        metavar="METHOD",
+        help=f"perception method: {', '.join(METHODS)}, an installed plug-in or "
+        "MODULE:CLASS[,KEY=VALUE...] (default correlation; 'published' = the published code)",
     )
     p.add_argument(
         "--beta",
@@ -142,13 +145,12 @@ def _truth(args: argparse.Namespace, stream: Stream) -> np.ndarray | None:
 
 
 def _flow(args: argparse.Namespace, stream: Stream) -> Any:
-    if args.flow == "raft":
+    spec = parse_spec(args.flow, "flow back end")
+    if spec.target == "raft" and "checkpoint" not in spec.params:
         if args.checkpoint is None:
             raise InputError("--flow raft needs --checkpoint (RAFT weights; nothing is downloaded)")
-        from cablesim.perception.flow import make_flow
-
-        return make_flow("raft", checkpoint=str(args.checkpoint))
-    if args.flow == "oracle":
+        return make_flow(args.flow, checkpoint=str(args.checkpoint))
+    if spec.target == "oracle":
         lacking = [
             i
             for i, f in enumerate(stream.frames[:-1])
@@ -179,7 +181,7 @@ def _refine(args: argparse.Namespace) -> RefineParams | None:
     """The default remedies, with the colour growth of ``--grow-colour``."""
     if args.grow_colour is None:
         return None
-    if args.method in PUBLISHED_METHODS:
+    if not make_method(args.method).refine_by_default:
         raise InputError(
             f"--grow-colour applies to correlation, segmentation and ablation, not {args.method!r}"
         )
@@ -208,9 +210,18 @@ def _pictures(out: Path, stream: Stream, seg: Any, truth: np.ndarray | None, tit
         write_png(out / "maps.png", np.concatenate(rows, axis=0))
 
 
+def _params_dict(params: Any) -> Any:
+    """A method's thresholds for summary.json (a dataclass's fields)."""
+    if params is None or not dataclasses.is_dataclass(params):
+        return None if params is None else repr(params)
+    return vars(params)
+
+
 def run(args: argparse.Namespace) -> int:
     t0 = time.time()
     out: Path = args.out
+    check_flow(args.flow)  # a bad name fails before the sequence is read
+    check_method(args.method)
     stream, layout, segment = _read(args)
     truth = _truth(args, stream)
     flow = _flow(args, stream)
@@ -252,7 +263,7 @@ def run(args: argparse.Namespace) -> int:
         "method": args.method,
         "flow": seg.stats.flow,
         "beta": args.beta,
-        "params": vars(params),
+        "params": _params_dict(params),
         "published": seg.stats.published_meta or None,
         "refine": seg.stats.refine,
         "given_segment_px": None if segment is None else int(segment.sum()),

@@ -8,6 +8,12 @@ Typical use::
     seg = segment_stream(stream, method="correlation", flow=DISFlow())   # or "published", ...
     votes = seg.votes                       # actions supporting each target pixel
     res = GraspSampler(reachability=robot_check).propose(votes, target.depth, target.intrinsics)
+
+Flow back ends (:class:`FlowEstimator`) and segmentation methods (:class:`SegmentationMethod`)
+are plug-ins: the built-ins are registered in :data:`FLOW_BACKENDS` and
+:data:`SEGMENTATION_METHODS`; a user's own is reached by an installed package's entry point
+(groups ``cablesim.flows``, ``cablesim.methods``) or as ``MODULE:CLASS`` wherever a name is
+asked for (``docs/plugins.md``).
 """
 
 from cablesim.perception.actions import (
@@ -23,11 +29,14 @@ from cablesim.perception.correlation import (
     moments_to_result,
 )
 from cablesim.perception.flow import (
+    FLOW_BACKENDS,
     DISFlow,
     FarnebackFlow,
     FlowEstimator,
     GateParams,
     OracleFlow,
+    check_flow,
+    flow_names,
     make_flow,
     texture_mask,
 )
@@ -53,6 +62,15 @@ from cablesim.perception.grasp_sampler import (
     GraspSampler,
     GraspSamplerParams,
     SamplingResult,
+)
+from cablesim.perception.methods import (
+    SEGMENTATION_METHODS,
+    PerActionAccumulator,
+    SegmentationMethod,
+    StreamContext,
+    check_method,
+    make_method,
+    method_names,
 )
 from cablesim.perception.metrics import (
     BETAS,
@@ -104,12 +122,14 @@ from cablesim.perception.votes import (
 __all__ = [
     "BETAS",
     "CURRENT_METHODS",
+    "FLOW_BACKENDS",
     "GRADES",
     "LABEL_BACKGROUND",
     "LABEL_ROBOT",
     "METHODS",
     "PUBLISHED_METHODS",
     "PUBLISHED_THRESHOLDS",
+    "SEGMENTATION_METHODS",
     "TARGET_ACTION",
     "AblationParams",
     "Candidate",
@@ -129,26 +149,32 @@ __all__ = [
     "Intrinsics",
     "MaskScores",
     "OracleFlow",
+    "PerActionAccumulator",
     "PublishedParams",
     "PublishedResult",
     "PublishedSegmentationResult",
     "RegionFlow",
     "SamplingResult",
     "SegmentPose",
+    "SegmentationMethod",
     "SegmentationAccumulator",
     "SegmentationParams",
     "SegmentationResult",
     "Stream",
     "StreamSegmentation",
+    "StreamContext",
     "StreamStatistics",
     "TuningResult",
     "VoteAccumulator",
     "action_direction",
+    "check_flow",
+    "check_method",
     "compute_statistics",
     "confusion",
     "eccentricity",
     "f_beta",
     "f_beta_counts",
+    "flow_names",
     "flow_epe",
     "geometric_median",
     "grade_proposal",
@@ -156,12 +182,14 @@ __all__ = [
     "intersection",
     "iter_flows",
     "make_flow",
+    "make_method",
     "masks_from_statistics",
     "mean_scores",
     "movingcables_frame",
     "movingcables_summary",
     "nanmean",
     "merge_votes",
+    "method_names",
     "moments_to_result",
     "score_mask",
     "segment_from_statistics",

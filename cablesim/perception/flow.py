@@ -11,7 +11,9 @@ target)`` does exactly that, and is what the pipeline calls.
 
 Back ends: :class:`OracleFlow` (simulator ground truth, evaluation/upper bound),
 :class:`DISFlow` (CPU default, with a low-texture gate), :class:`FarnebackFlow`, and
-``cablesim.perception.raft.RaftFlow`` (torch, user-supplied checkpoint).
+``cablesim.perception.raft.RaftFlow`` (torch, user-supplied checkpoint).  They register
+themselves in :data:`FLOW_BACKENDS` by name; :func:`make_flow` builds one from a spec, which may
+also name an installed package's entry point (group ``cablesim.flows``) or ``MODULE:CLASS``.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import numpy as np
 from cablesim.errors import InputError
 from cablesim.perception._checks import as_image, check_params
 from cablesim.perception.frames import Frame
+from cablesim.perception.registry import Registry
 
 DIS_PRESETS = {
     "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
@@ -321,22 +324,44 @@ class FarnebackFlow(FlowEstimator):
         return {"name": self.name, **self.params, "gate": vars(self.gate)}
 
 
+#: every flow back end by name: the built-ins below, installed packages' entry points of the
+#: group ``cablesim.flows``, or ``MODULE:CLASS`` (a :class:`FlowEstimator` subclass) in a spec
+#: (:mod:`cablesim.perception.registry`: ``"dis,preset=fast"``, ``"my_flow:MyFlow,scale=2"``)
+FLOW_BACKENDS: Registry[FlowEstimator] = Registry("flow back end", FlowEstimator, "cablesim.flows")
+FLOW_BACKENDS.register("dis", DISFlow, "OpenCV DIS with the low-texture gate (the CPU default)")
+for _preset in DIS_PRESETS:
+    FLOW_BACKENDS.register(f"dis-{_preset}", DISFlow, f"DIS, preset {_preset}", preset=_preset)
+FLOW_BACKENDS.register("farneback", FarnebackFlow, "OpenCV Farneback dense flow")
+FLOW_BACKENDS.register(
+    "raft",
+    "cablesim.perception.raft:RaftFlow",
+    "RAFT-style network from a checkpoint (torch; raft,checkpoint=FILE)",
+)
+FLOW_BACKENDS.register(
+    "oracle", OracleFlow, "the simulator's ground-truth flow (simulated streams only)"
+)
+
+
 def make_flow(name: str | FlowEstimator = "dis", **kwargs: Any) -> FlowEstimator:
-    """A flow back end by name: ``oracle``, ``dis``, ``farneback`` or ``raft`` (needs
-    ``checkpoint=``); an estimator instance is returned unchanged."""
+    """A flow back end from a spec (:data:`FLOW_BACKENDS`): ``oracle``, ``dis`` (or
+    ``dis-<preset>``), ``farneback``, ``raft`` (needs ``checkpoint=``), an installed entry
+    point's name or ``MODULE:CLASS``, each optionally with ``,key=value`` parameters;
+    ``kwargs`` add to them.  An estimator instance is returned unchanged."""
     if isinstance(name, FlowEstimator):
         return name
-    if name == "oracle":
-        return OracleFlow(**kwargs)
-    if name == "dis":
-        return DISFlow(**kwargs)
-    if name == "farneback":
-        return FarnebackFlow(**kwargs)
-    if name == "raft":
-        from cablesim.perception.raft import RaftFlow
+    return FLOW_BACKENDS.create(name, **kwargs)
 
-        return RaftFlow(**kwargs)
-    raise InputError(f"unknown flow back end {name!r}; choose oracle, dis, farneback or raft")
+
+def check_flow(spec: str | FlowEstimator) -> None:
+    """``InputError`` (listing the choices) unless ``spec`` names a flow back end; imports a
+    ``MODULE:CLASS`` target's module but builds nothing."""
+    if not isinstance(spec, FlowEstimator):
+        FLOW_BACKENDS.check(spec)
+
+
+def flow_names() -> list[str]:
+    """Every registered flow back end's name (built-ins, then installed entry points)."""
+    return FLOW_BACKENDS.names()
 
 
 def endpoint_error(flow: np.ndarray, truth: np.ndarray, mask: np.ndarray | None = None) -> float:

@@ -18,9 +18,12 @@ colour (an option: it relies on the hoses differing in colour).
 :func:`segment_stream` turns the statistics into per-action masks and a vote image for one
 method (``"correlation"``, ``"segmentation"`` or ``"ablation"``, or the published code's
 ``"published"``, ``"published-segmentation"`` and ``"published-ablation"`` of
-:mod:`cablesim.perception.published`, which keep frames by their own rules; when both kinds
-are asked for, each frame's flow is computed once); :func:`masks_from_statistics`
-re-thresholds cached statistics cheaply (tuning).
+:mod:`cablesim.perception.published`, which keep frames by their own rules, or a user's method:
+any spec of :data:`~cablesim.perception.methods.SEGMENTATION_METHODS`).  Methods are objects
+(:class:`~cablesim.perception.methods.SegmentationMethod`): :func:`compute_statistics` makes
+one accumulator per statistic the methods need and feeds each the frames it plans; a frame
+several methods plan has its flow computed once.  :func:`masks_from_statistics` re-thresholds
+cached statistics cheaply (tuning).
 
 ``region`` is where flow is computed (:mod:`cablesim.perception.flow_region`); the default
 ``"auto"`` takes the crop and scale a stream read from the published layout carries in its
@@ -31,52 +34,37 @@ from __future__ import annotations
 
 import queue
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception.actions import (
-    action_direction,
-    gripper_displacements,
-    subsample_by_gripper,
-)
-from cablesim.perception.correlation import (
-    AblationParams,
-    CorrelationAccumulator,
-    CorrelationParams,
-    CorrelationResult,
-)
+from cablesim.perception.actions import action_direction
+from cablesim.perception.correlation import AblationParams, CorrelationParams
 from cablesim.perception.flow import FlowEstimator, make_flow
 from cablesim.perception.flow_region import FlowRegion, with_region
 from cablesim.perception.frames import Frame, Stream
-from cablesim.perception.published import (
-    PUBLISHED_METHODS,
-    PUBLISHED_THRESHOLDS,
-    PublishedAccumulator,
-    PublishedParams,
-    PublishedResult,
-    PublishedSegmentationResult,
-    metric_scale,
-    plan_published,
+from cablesim.perception.methods import (
+    CURRENT_METHODS,
+    METHODS,
+    SegmentationMethod,
+    StreamContext,
+    make_method,
+    method_label,
 )
-from cablesim.perception.published import describe as describe_published
+from cablesim.perception.published import PUBLISHED_METHODS, PUBLISHED_THRESHOLDS, PublishedParams
 from cablesim.perception.refine import (
     DEFAULT_REFINE,
-    GrowParams,
     RefineParams,
     SampleFilter,
     colour_guide,
     grow_by_colour,
     support_mask,
 )
-from cablesim.perception.segmentation import (
-    SegmentationAccumulator,
-    SegmentationParams,
-    SegmentationResult,
-)
+from cablesim.perception.segmentation import SegmentationParams
+from cablesim.perception.stats import Job, StreamStatistics, plan_jobs
 from cablesim.perception.votes import merge_votes, vote_image
 
 Method = Literal[
@@ -87,45 +75,22 @@ Method = Literal[
     "published-segmentation",
     "published-ablation",
 ]
-CURRENT_METHODS: tuple[str, ...] = ("correlation", "segmentation", "ablation")
-METHODS: tuple[str, ...] = CURRENT_METHODS + PUBLISHED_METHODS
 
-
-@dataclass
-class Job:
-    """One kept frame: its action, its index among kept samples, d_g and gripper depth."""
-
-    action: int
-    index: int
-    frame: Frame
-    d_g: float
-    z: float
-
-
-@dataclass
-class StreamStatistics:
-    """Per-action statistics of one stream, enough to threshold any method."""
-
-    shape: tuple[int, int]
-    actions: list[int]
-    n_samples: dict[int, int]
-    correlation: dict[int, CorrelationResult] = field(default_factory=dict)
-    segmentation: dict[int, SegmentationResult] = field(default_factory=dict)
-    directions: dict[int, np.ndarray] = field(default_factory=dict)
-    flow: dict[str, Any] = field(default_factory=dict)
-    published: dict[int, PublishedResult] = field(default_factory=dict)
-    published_segmentation: dict[int, PublishedSegmentationResult] = field(default_factory=dict)
-    published_meta: dict[str, Any] = field(default_factory=dict)
-    # target pixels allowed to vote (``cablesim.perception.refine.support_mask``); None: all
-    support: np.ndarray | None = None
-    # the same for the published methods: only when a refine was asked for explicitly (by
-    # default they stay the published code's)
-    published_support: np.ndarray | None = None
-    refine: dict[str, Any] = field(default_factory=dict)
-    # colour growth of the current methods' masks (``RefineParams.grow``): the parameters and
-    # the target frame in CIELAB (``cablesim.perception.refine.colour_guide``); None: off
-    grow: GrowParams | None = None
-    guide: np.ndarray | None = None
+__all__ = [
+    "CURRENT_METHODS",
+    "METHODS",
+    "PUBLISHED_METHODS",
+    "Job",
+    "StreamSegmentation",
+    "StreamStatistics",
+    "compute_statistics",
+    "iter_flows",
+    "masks_from_statistics",
+    "params_for_beta",
+    "plan_jobs",
+    "segment_from_statistics",
+    "segment_stream",
+]
 
 
 @dataclass
@@ -144,38 +109,12 @@ class StreamSegmentation:
         return merge_votes(self.votes, n, len(self.masks))
 
 
-def plan_jobs(stream: Stream, delta_g: float = 0.001) -> list[Job]:
-    """Kept frames of every action in stream order, with their d_g and gripper depth."""
-    jobs: list[Job] = []
-    _ = stream.target  # raises if the last frame is not a target frame
-    for a in stream.actions:
-        frames = stream.action_frames(a)
-        kept = subsample_by_gripper(frames, delta_g)
-        d_g = gripper_displacements(kept, action_direction(frames))
-        for i, (f, d) in enumerate(zip(kept, d_g, strict=True)):
-            jobs.append(Job(a, i, f, float(d), float(f.gripper[2])))
-    return jobs
-
-
-def _flows_sequential(
-    jobs: Sequence[Job], flow: FlowEstimator, target: Frame, check: SampleFilter | None = None
-) -> Iterator[tuple[Job, np.ndarray]]:
-    for job in jobs:
-        phi = flow.frame_flow(job.frame, target)
-        yield job, (phi if check is None else check.apply(phi, job.frame))
-
-
 _DONE = object()
 
 
-def _flows_pipelined(
-    jobs: Sequence[Job],
-    flow: FlowEstimator,
-    target: Frame,
-    queue_size: int = 4,
-    check: SampleFilter | None = None,
-) -> Iterator[tuple[Job, np.ndarray]]:
-    """Stage 1 in a worker thread; yields (job, flow) in job order."""
+def _pipelined(items: Iterable[Any], work: Callable[[Any], Any], queue_size: int) -> Iterator[Any]:
+    """``work(item)`` for every item in a worker thread (stage 1); yields the results in
+    order while the caller consumes them (stage 2); an error of either stage propagates."""
     q: queue.Queue = queue.Queue(maxsize=max(1, int(queue_size)))
     stop = threading.Event()
 
@@ -190,13 +129,10 @@ def _flows_pipelined(
 
     def worker() -> None:
         try:
-            for job in jobs:
+            for item in items:
                 if stop.is_set():
                     return
-                phi = flow.frame_flow(job.frame, target)
-                if check is not None:
-                    phi = check.apply(phi, job.frame)
-                if not put((job, phi)):
+                if not put(work(item)):
                     return
             put(_DONE)
         except BaseException as exc:  # noqa: BLE001 - re-raised in the consumer
@@ -217,6 +153,14 @@ def _flows_pipelined(
         t.join(timeout=10.0)
 
 
+def _run(
+    items: Sequence[Any], work: Callable[[Any], Any], pipelined: bool, queue_size: int
+) -> Iterator[Any]:
+    if pipelined:
+        return _pipelined(items, work, queue_size)
+    return (work(item) for item in items)
+
+
 def iter_flows(
     stream: Stream,
     flow: FlowEstimator | str = "dis",
@@ -234,9 +178,12 @@ def iter_flows(
     check = None
     if refine is not None and refine.per_sample:
         check = SampleFilter(refine, target, est)
-    if pipelined:
-        return _flows_pipelined(jobs, est, target, queue_size, check)
-    return _flows_sequential(jobs, est, target, check)
+
+    def work(job: Job) -> tuple[Job, np.ndarray]:
+        phi = est.frame_flow(job.frame, target)
+        return job, (phi if check is None else check.apply(phi, job.frame))
+
+    return _run(jobs, work, pipelined, queue_size)
 
 
 def _resolve_region(stream: Stream, region: FlowRegion | str | None) -> FlowRegion | None:
@@ -247,10 +194,30 @@ def _resolve_region(stream: Stream, region: FlowRegion | str | None) -> FlowRegi
     raise InputError(f"region must be a FlowRegion, 'auto' or None, got {region!r}")
 
 
+@dataclass
+class _Group:
+    """The methods sharing one statistic: one accumulator, its plan, its flow filter."""
+
+    method: SegmentationMethod  # the first of them: it makes and stores the accumulator
+    params: Any
+    filtered: bool  # fed the flow after the per-sample checks
+    acc: Any = None
+    plan: list[tuple[int, Any]] = field(default_factory=list)
+
+
+def _methods(methods: Sequence[str | SegmentationMethod]) -> list[SegmentationMethod]:
+    if isinstance(methods, str | SegmentationMethod):
+        methods = (methods,)
+    objs = [make_method(m) for m in methods]
+    if not objs:
+        raise InputError("no method given: name at least one (e.g. 'correlation')")
+    return objs
+
+
 def compute_statistics(
     stream: Stream,
     flow: FlowEstimator | str = "dis",
-    methods: Sequence[str] = CURRENT_METHODS,
+    methods: Sequence[str | SegmentationMethod] = CURRENT_METHODS,
     correlation: CorrelationParams | AblationParams | None = None,
     segmentation: SegmentationParams | None = None,
     delta_g: float = 0.001,
@@ -260,9 +227,14 @@ def compute_statistics(
     published: PublishedParams | None = None,
     region: FlowRegion | str | None = "auto",
     refine: RefineParams | None = None,
+    params: Mapping[str, Any] | None = None,
 ) -> StreamStatistics:
     """One pass over the stream feeding the accumulators the ``methods`` need.
 
+    ``methods``: specs or :class:`~cablesim.perception.methods.SegmentationMethod` objects.
+    Each statistic's accumulator gets the parameters of its method's ``params_key``: the
+    built-ins' ``correlation``, ``segmentation`` and ``published`` keywords, any other
+    method's entry in ``params`` (by its ``params_key``, by default its name).
     ``refine`` (default :data:`~cablesim.perception.refine.DEFAULT_REFINE`) selects the bleed
     remedies of :mod:`cablesim.perception.refine`: per-sample checks on every flow, and the
     target pixels allowed to vote (``StreamStatistics.support``)."""
@@ -270,192 +242,128 @@ def compute_statistics(
         stream = Stream(list(stream))
     if not isinstance(stream, Stream):
         raise InputError(f"stream must be a Stream, got {type(stream).__name__}")
-    for m in methods:
-        if m not in METHODS:
-            raise InputError(f"unknown method {m!r}; choose from {METHODS}")
-    cparams = correlation if correlation is not None else CorrelationParams()
-    if isinstance(cparams, AblationParams):
-        cparams = CorrelationParams(
-            tau_n=cparams.tau_n, depth_mode=cparams.depth_mode, min_samples=cparams.min_samples
-        )
-    sparams = segmentation if segmentation is not None else SegmentationParams()
-    pparams = published if published is not None else PublishedParams()
-    want_corr = "correlation" in methods or "ablation" in methods
-    want_seg = "segmentation" in methods
-    want_pub_corr = "published" in methods or "published-ablation" in methods
-    want_pub_seg = "published-segmentation" in methods
-    want_pub = want_pub_corr or want_pub_seg
+    objs = _methods(methods)
+    given: dict[str, Any] = {
+        "correlation": correlation,
+        "segmentation": segmentation,
+        "published": published,
+        **(params or {}),
+    }
     target = stream.target
-    shape = target.shape
-    focal = target.intrinsics.f
     est = with_region(make_flow(flow), _resolve_region(stream, region))
     if not stream.actions:
         raise InputError("the stream has no action frames")
-    corr: dict[int, CorrelationAccumulator] = {}
-    seg: dict[int, SegmentationAccumulator] = {}
-    counts: dict[int, int] = {}
     rp = DEFAULT_REFINE if refine is None else refine
     if not isinstance(rp, RefineParams):
         raise InputError(f"refine must be a RefineParams, got {type(rp).__name__}")
+    check = SampleFilter(rp, target, est) if rp.per_sample else None
+    ctx = StreamContext(stream, target, target.shape, target.intrinsics.f, dtype, delta_g)
+    groups: dict[str, _Group] = {}
+    for m in objs:
+        if m.key in groups:
+            continue
+        p = given.get(m.accumulation_key)
+        filtered = check is not None and (m.refine_by_default or refine is not None)
+        g = groups[m.key] = _Group(m, p, filtered)
+        g.acc = m.accumulator(ctx, p)
+        g.plan = m.plan(stream, p, delta_g)
+    feeds = _feeds(groups.values())
+    units = [(i, stream.frames[i], any(g.filtered for g, _ in feeds[i])) for i in feeds]
 
-    def feed_current(job: Job, phi: np.ndarray) -> None:
-        a = job.action
-        if want_corr:
-            if a not in corr:
-                corr[a] = CorrelationAccumulator(shape, focal, cparams, target.depth, dtype)
-            corr[a].update(phi, job.d_g, job.z)
-        if want_seg:
-            if a not in seg:
-                seg[a] = SegmentationAccumulator(shape, sparams)
-            seg[a].update(phi)
-        counts[a] = counts.get(a, 0) + 1
+    def work(unit: tuple[int, Frame, bool]) -> tuple[int, np.ndarray, np.ndarray]:
+        i, frame, want = unit
+        phi = est.frame_flow(frame, target)
+        # each filter runs at most once per frame (the methods planning it share the result)
+        return i, phi, (check.apply(phi, frame) if want and check is not None else phi)
 
-    pub_meta: dict[str, Any] = {}
-    pub_acc: PublishedAccumulator | None = None
-    if not want_pub:
-        for job, phi in iter_flows(stream, est, delta_g, pipelined, queue_size, rp):
-            feed_current(job, phi)
-    else:
-        z, f, mdtype = metric_scale(stream, pparams)
-        pub_meta = describe_published(pparams, z, f)
-        pub_acc = PublishedAccumulator(shape, z / f, pparams, want_pub_corr, want_pub_seg, mdtype)
-        index_of = {id(fr): i for i, fr in enumerate(stream.frames)}
-        want_current = want_corr or want_seg
-        cur = {index_of[id(j.frame)]: j for j in plan_jobs(stream, delta_g)} if want_current else {}
-        pub = {j.frame_index: j for j in plan_published(stream, pparams.min_gripper_diff)}
-        if not pub:
-            raise InputError("the stream has no frame with a non-negative action code")
-        units = [Job(-1, i, stream.frames[i], 0.0, 0.0) for i in sorted(set(cur) | set(pub))]
-        flows = (
-            _flows_pipelined(units, est, target, queue_size)
-            if pipelined
-            else _flows_sequential(units, est, target)
-        )
-        check = SampleFilter(rp, target, est) if want_current and rp.per_sample else None
-        pub_check = None
-        if refine is not None and refine.per_sample:
-            pub_check = check if check is not None else SampleFilter(refine, target, est)
-        for unit, phi in flows:
-            # each filter runs at most once per frame (the two kinds may share one)
-            checked = phi
-            if check is not None and (unit.index in cur or pub_check is check):
-                checked = check.apply(phi, unit.frame)
-            if unit.index in cur:
-                feed_current(cur[unit.index], checked)
-            if unit.index in pub:
-                if pub_check is None:
-                    phi_pub = phi
-                elif pub_check is check:
-                    phi_pub = checked
-                else:
-                    phi_pub = pub_check.apply(phi, unit.frame)
-                pub_acc.update(pub[unit.index], phi_pub)
-    pub_corr, pub_seg = pub_acc.results() if pub_acc is not None else ({}, {})
-    actions = sorted(counts) if counts else sorted(set(pub_corr) | set(pub_seg))
-    if not counts:
-        src = pub_corr or pub_seg
-        counts = {a: r.n_samples for a, r in src.items()}
-    return StreamStatistics(
-        shape=shape,
-        actions=actions,
-        n_samples=counts,
-        correlation={a: acc.result() for a, acc in corr.items()},
-        segmentation={a: acc.result() for a, acc in seg.items()},
-        directions={a: action_direction(stream.action_frames(a)) for a in actions},
+    for i, phi, checked in _run(units, work, pipelined, queue_size):
+        for g, job in feeds[i]:
+            g.acc.update(job, checked if g.filtered else phi)
+    return _statistics(stream, objs, groups, est, rp, refine)
+
+
+def _feeds(groups: Iterable[_Group]) -> dict[int, list[tuple[_Group, Any]]]:
+    """Stream index -> the (group, job) pairs fed its flow, in the order flows are computed:
+    the one plan's order when every group plans the same frames, else stream order."""
+    groups = list(groups)
+    orders = [[i for i, _ in g.plan] for g in groups]
+    same = all(o == orders[0] for o in orders)
+    order = orders[0] if same else sorted({i for o in orders for i in o})
+    feeds: dict[int, list[tuple[_Group, Any]]] = {i: [] for i in order}
+    for g in groups:
+        for i, job in g.plan:
+            feeds[i].append((g, job))
+    return feeds
+
+
+def _statistics(
+    stream: Stream,
+    objs: Sequence[SegmentationMethod],
+    groups: dict[str, _Group],
+    est: FlowEstimator,
+    rp: RefineParams,
+    refine: RefineParams | None,
+) -> StreamStatistics:
+    target = stream.target
+    default_plan = [g for g in groups.values() if type(g.method).plan is SegmentationMethod.plan]
+    by_default = any(m.refine_by_default for m in objs)
+    stats = StreamStatistics(
+        shape=target.shape,
+        actions=[],
+        n_samples={},
         flow=est.describe(),
-        published=pub_corr,
-        published_segmentation=pub_seg,
-        published_meta=pub_meta,
-        support=support_mask(target, rp) if (want_corr or want_seg) else None,
+        support=support_mask(target, rp) if by_default else None,
         published_support=(
-            support_mask(target, refine) if want_pub and refine is not None else None
+            support_mask(target, refine)
+            if refine is not None and not all(m.refine_by_default for m in objs)
+            else None
         ),
         refine=rp.describe(),
         grow=rp.grow,
         guide=colour_guide(target.rgb) if rp.grow is not None else None,
     )
+    for g in groups.values():
+        g.method.store(stats, g.acc.result())
+    first = default_plan[0] if default_plan else next(iter(groups.values()))
+    stats.n_samples = first.method.n_samples(stats, first.plan)
+    stats.actions = sorted(stats.n_samples)
+    stats.directions = {a: action_direction(stream.action_frames(a)) for a in stats.actions}
+    return stats
 
 
 def masks_from_statistics(
     stats: StreamStatistics,
-    method: str,
-    params: CorrelationParams | SegmentationParams | AblationParams | PublishedParams | None = None,
+    method: str | SegmentationMethod,
+    params: Any = None,
 ) -> dict[int, np.ndarray]:
-    """Per-action masks of ``method`` from cached statistics (only where ``stats.support``)."""
-    masks = _raw_masks(stats, method, params)
-    support = stats.published_support if method in PUBLISHED_METHODS else stats.support
+    """Per-action masks of ``method`` from cached statistics (only where the method's
+    support allows; grown along the colour for the methods the default remedies apply to)."""
+    m = make_method(method)
+    masks = m.masks(stats, params)
+    support = m.support(stats)
     if support is not None:
-        masks = {a: m & support for a, m in masks.items()}
-    if method not in PUBLISHED_METHODS and stats.grow is not None and stats.guide is not None:
-        masks = {a: grow_by_colour(m, stats.guide, stats.grow, support) for a, m in masks.items()}
+        masks = {a: mk & support for a, mk in masks.items()}
+    if m.refine_by_default and stats.grow is not None and stats.guide is not None:
+        masks = {a: grow_by_colour(mk, stats.guide, stats.grow, support) for a, mk in masks.items()}
     return masks
 
 
-def _raw_masks(
-    stats: StreamStatistics,
-    method: str,
-    params: CorrelationParams | SegmentationParams | AblationParams | PublishedParams | None = None,
-) -> dict[int, np.ndarray]:
-    if method == "correlation":
-        p = params if params is not None else CorrelationParams()
-        if not isinstance(p, CorrelationParams):
-            raise InputError("method 'correlation' needs CorrelationParams")
-        src = stats.correlation
-        if not src:
-            raise InputError("statistics were computed without the correlation method")
-        return {a: src[a].mask(p.c0_min, p.r2_min) for a in stats.actions}
-    if method == "ablation":
-        p = params if params is not None else AblationParams()
-        if not isinstance(p, AblationParams):
-            raise InputError("method 'ablation' needs AblationParams")
-        src = stats.correlation
-        if not src:
-            raise InputError("statistics were computed without the correlation moments")
-        return {a: src[a].ablation_mask(p.std_min) for a in stats.actions}
-    if method == "segmentation":
-        p = params if params is not None else SegmentationParams()
-        if not isinstance(p, SegmentationParams):
-            raise InputError("method 'segmentation' needs SegmentationParams")
-        if not stats.segmentation:
-            raise InputError("statistics were computed without the segmentation method")
-        return {a: stats.segmentation[a].mask(p.tau_v) for a in stats.actions}
-    if method in PUBLISHED_METHODS:
-        p = params if params is not None else PublishedParams()
-        if not isinstance(p, PublishedParams):
-            raise InputError(f"method {method!r} needs PublishedParams")
-        if method == "published-segmentation":
-            if not stats.published_segmentation:
-                raise InputError("statistics were computed without published-segmentation")
-            return {a: r.mask(p.vote) for a, r in stats.published_segmentation.items()}
-        if not stats.published:
-            raise InputError(f"statistics were computed without the {method!r} method")
-        if method == "published":
-            return {a: r.mask(p.r2, p.c0) for a, r in stats.published.items()}
-        return {a: r.ablation_mask(p.std) for a, r in stats.published.items()}
-    raise InputError(f"unknown method {method!r}; choose from {METHODS}")
-
-
 def segment_from_statistics(
-    stats: StreamStatistics, method: str = "correlation", params: Any = None
+    stats: StreamStatistics, method: str | SegmentationMethod = "correlation", params: Any = None
 ) -> StreamSegmentation:
-    masks = masks_from_statistics(stats, method, params)
+    m = make_method(method)
+    masks = masks_from_statistics(stats, m, params)
     votes = vote_image(list(masks.values()))
-    out = StreamSegmentation(method=method, masks=masks, votes=votes, stats=stats)
-    if method in ("correlation", "ablation"):
-        out.c0 = {a: r.c0 for a, r in stats.correlation.items()}
-        out.r2 = {a: r.r2 for a, r in stats.correlation.items()}
-    elif method in ("published", "published-ablation"):
-        f32 = np.float32
-        out.c0 = {a: np.nan_to_num(r.c0).astype(f32) for a, r in stats.published.items()}
-        out.r2 = {a: np.nan_to_num(r.r2).astype(f32) for a, r in stats.published.items()}
+    out = StreamSegmentation(method=method_label(method), masks=masks, votes=votes, stats=stats)
+    out.c0, out.r2 = m.maps(stats)
     return out
 
 
 def segment_stream(
     stream: Stream,
-    method: str = "correlation",
+    method: str | SegmentationMethod = "correlation",
     flow: FlowEstimator | str = "dis",
-    params: CorrelationParams | SegmentationParams | AblationParams | PublishedParams | None = None,
+    params: Any = None,
     delta_g: float = 0.001,
     pipelined: bool = True,
     queue_size: int = 4,
@@ -464,54 +372,47 @@ def segment_stream(
 ) -> StreamSegmentation:
     """Segment the grasped hose in the target frame of ``stream`` with one method.
 
+    ``method``: a built-in's name, an installed plug-in's name, ``MODULE:CLASS`` or a
+    :class:`~cablesim.perception.methods.SegmentationMethod`; ``flow`` likewise a flow back
+    end's spec or a :class:`~cablesim.perception.flow.FlowEstimator`.  ``params`` go to both
+    the pass and the thresholds (e.g. ``CorrelationParams`` for ``"correlation"``).
+
     Returns per-action masks, their vote image, and (correlation, ablation and the published
     correlation) the c0 and R^2 maps.  ``refine``: the bleed remedies
     (:func:`compute_statistics`).
     """
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose from {METHODS}")
-    kw: dict[str, Any] = {"region": region}
-    if method in PUBLISHED_METHODS:
-        if params is not None and not isinstance(params, PublishedParams):
-            raise InputError(f"method {method!r} needs PublishedParams")
-        kw["published"] = params
-    elif method == "segmentation":
-        if params is not None and not isinstance(params, SegmentationParams):
-            raise InputError("method 'segmentation' needs SegmentationParams")
-        kw["segmentation"] = params
-    else:
-        if params is not None and not isinstance(params, CorrelationParams | AblationParams):
-            raise InputError(f"method {method!r} needs CorrelationParams or AblationParams")
-        kw["correlation"] = params
+    m = make_method(method)
+    if params is not None and not m.accepts(params):
+        raise InputError(f"method {m.name!r} needs {_needs(m)}")
     stats = compute_statistics(
         stream,
         flow,
-        methods=(method,),
+        methods=(m,),
         delta_g=delta_g,
         pipelined=pipelined,
         queue_size=queue_size,
+        region=region,
         refine=refine,
-        **kw,
+        params={m.accumulation_key: params},
     )
-    return segment_from_statistics(stats, method, params)
+    out = segment_from_statistics(stats, m, params)
+    out.method = method_label(method)
+    return out
 
 
-def params_for_beta(
-    method: str, beta: float = 0.4
-) -> CorrelationParams | SegmentationParams | AblationParams | PublishedParams:
+def _needs(m: SegmentationMethod) -> str:
+    if m.accumulation_key == "correlation":
+        return "CorrelationParams or AblationParams"
+    return m.params_type.__name__ if m.params_type is not None else "no parameters"
+
+
+def params_for_beta(method: str | SegmentationMethod, beta: float = 0.4) -> Any:
     """The thresholds of SPEC sections 7-8 for ``method`` at ``beta`` (1, 0.5, 0.4, 0.3, 0.2,
     0.1): the published table for every method (R^2, |c0| and vote share as fractions for
     cablesim's own correlation and segmentation); cablesim's ablation, whose statistic differs
-    from the published one, keeps its default threshold."""
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose from {METHODS}")
+    from the published one, keeps its default threshold, and so does a method without a
+    table of its own (:meth:`~cablesim.perception.methods.SegmentationMethod.params_for_beta`)."""
+    m = make_method(method)
     if beta not in PUBLISHED_THRESHOLDS:
         raise InputError(f"beta must be one of {sorted(PUBLISHED_THRESHOLDS)}, got {beta!r}")
-    r2, c0, vote, _ = PUBLISHED_THRESHOLDS[beta]
-    if method in PUBLISHED_METHODS:
-        return PublishedParams(beta=beta)
-    if method == "correlation":
-        return CorrelationParams(c0_min=c0 / 100, r2_min=r2 / 100)
-    if method == "segmentation":
-        return SegmentationParams(tau_v=vote / 100)
-    return AblationParams()
+    return m.params_for_beta(beta)

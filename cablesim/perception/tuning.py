@@ -7,7 +7,10 @@ confusion counts for all thresholds t of a grid follow from one sort per sequenc
 - segmentation: score = n-th largest vote fraction over actions, t = tau_v;
 - ablation: score = n-th largest std(d_phi), t = std_min;
 - correlation: for each c0_min, score = n-th largest R^2 among actions with |c0| > c0_min,
-  t = R2_min.
+  t = R2_min;
+- any other method: its own score and grid
+  (:meth:`~cablesim.perception.methods.SegmentationMethod.action_scores`, ``grid``), by
+  default its fixed mask at its default parameters (one grid point).
 
 (n = action threshold of the vote merge; 1 = union.)  The thresholds maximising the mean
 F_beta over sequences are chosen per beta.  Scores follow :func:`~cablesim.perception.metrics.
@@ -19,31 +22,20 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from cablesim.errors import InputError
 from cablesim.perception._checks import as_mask
-from cablesim.perception.correlation import AblationParams, CorrelationParams
+from cablesim.perception.methods import SegmentationMethod, make_method, method_label
 from cablesim.perception.metrics import BETAS, f_beta
-from cablesim.perception.pipeline import StreamStatistics
-from cablesim.perception.segmentation import SegmentationParams
+from cablesim.perception.stats import StreamStatistics
 
+#: the threshold grids of cablesim's own methods (a method's ``grid()``)
 DEFAULT_GRIDS: dict[str, dict[str, np.ndarray]] = {
-    "segmentation": {"tau_v": np.round(np.arange(0.0, 1.0, 0.02), 4)},
-    "correlation": {
-        "c0_min": np.round(np.arange(0.0, 1.0, 0.02), 4),
-        "r2_min": np.round(np.arange(0.0, 1.0, 0.02), 4),
-    },
-    "ablation": {"std_min": np.round(np.arange(0.0, 0.02, 0.0005), 6)},
+    name: make_method(name).grid() for name in ("segmentation", "correlation", "ablation")
 }
-
-
-def _nth_largest(stack: np.ndarray, n: int) -> np.ndarray:
-    """n-th largest value along axis 0 (-inf where fewer than n)."""
-    if n > stack.shape[0]:
-        return np.full(stack.shape[1:], -np.inf)
-    return np.sort(stack, axis=0)[stack.shape[0] - n]
 
 
 def _counts_for_thresholds(
@@ -109,45 +101,28 @@ class TuningResult:
     n: int
     rows: dict[float, TuningRow] = field(default_factory=dict)
 
-    def params(self, beta: float = 0.4) -> CorrelationParams | SegmentationParams | AblationParams:
+    def params(self, beta: float = 0.4) -> Any:
         """Method parameters with the thresholds tuned for ``beta``."""
-        pr = self.rows[beta].params
-        if self.method == "correlation":
-            return CorrelationParams(c0_min=pr["c0_min"], r2_min=pr["r2_min"])
-        if self.method == "segmentation":
-            return SegmentationParams(tau_v=pr["tau_v"])
-        return AblationParams(std_min=pr["std_min"])
+        return make_method(self.method).params_for(self.rows[beta].params)
 
 
-def _scores_for(
-    stats: StreamStatistics, method: str, n: int, c0_min: float | None = None
-) -> np.ndarray:
-    acts = stats.actions
-    if method == "segmentation":
-        if not stats.segmentation:
-            raise InputError("statistics lack the segmentation method")
-        stack = np.stack([stats.segmentation[a].fraction for a in acts])
-    elif method == "ablation":
-        stack = np.stack([stats.correlation[a].std_dphi for a in acts])
-    elif method == "correlation":
-        stack = np.stack(
-            [
-                np.where(np.abs(stats.correlation[a].c0) > c0_min, stats.correlation[a].r2, -np.inf)
-                for a in acts
-            ]
-        )
+def _grid(
+    m: SegmentationMethod, grid: dict[str, np.ndarray] | None
+) -> tuple[str | None, np.ndarray, str, np.ndarray]:
+    """(outer name, outer values, inner name, inner values) of a method's grid; the outer
+    values are [NaN] for a method with one threshold."""
+    g = {**m.grid(), **(grid or {})}
+    if m.outer_threshold is None:
+        outer_name, outer = None, np.array([np.nan])
     else:
-        raise InputError(f"unknown method {method!r}")
-    score = _nth_largest(stack.astype(np.float64), n)
-    if stats.support is not None:  # pixels that may not vote never pass a threshold
-        score = np.where(stats.support, score, -np.inf)
-    return score
+        outer_name, outer = m.outer_threshold, np.asarray(g[m.outer_threshold], float)
+    return outer_name, outer, m.threshold, np.asarray(g[m.threshold], float)
 
 
 def tune_thresholds(
     stats: Sequence[StreamStatistics],
     truths: Sequence[np.ndarray],
-    method: str = "correlation",
+    method: str | SegmentationMethod = "correlation",
     betas: Sequence[float] = BETAS,
     n: int = 1,
     grid: dict[str, np.ndarray] | None = None,
@@ -157,26 +132,18 @@ def tune_thresholds(
         raise InputError(
             f"need as many truths as statistics (>0), got {len(stats)} and {len(truths)}"
         )
-    if method not in DEFAULT_GRIDS:
-        raise InputError(f"unknown method {method!r}")
-    grid = {**DEFAULT_GRIDS[method], **(grid or {})}
+    m = make_method(method)
+    outer_name, outer, inner_name, inner = _grid(m, grid)
     masks = [
         as_mask(t, s.shape, name=f"truth {i}")
         for i, (s, t) in enumerate(zip(stats, truths, strict=True))
     ]
-    if method == "correlation":
-        outer = np.asarray(grid["c0_min"], float)
-        inner_name, inner = "r2_min", np.asarray(grid["r2_min"], float)
-    else:
-        outer = np.array([np.nan])
-        inner_name = "tau_v" if method == "segmentation" else "std_min"
-        inner = np.asarray(grid[inner_name], float)
     shape = (len(outer), len(inner))
     P, R, J = _NanMean(shape), _NanMean(shape), _NanMean(shape)
     Fs = {b: _NanMean(shape) for b in betas}
     for s, t in zip(stats, masks, strict=True):
         for i, c in enumerate(outer):
-            score = _scores_for(s, method, n, None if np.isnan(c) else c)
+            score = m.score(s, n, None if np.isnan(c) else c)
             tp, fp, npos = _counts_for_thresholds(score, t, inner)
             p, r, j = _prf(tp, fp, npos)
             P.add(i, p)
@@ -184,15 +151,15 @@ def tune_thresholds(
             J.add(i, j)
             for b in betas:
                 Fs[b].add(i, _f_beta_counts(tp, fp, npos, b))
-    res = TuningResult(method, n)
+    res = TuningResult(method_label(method), n)
     for b in betas:
         fb = np.nan_to_num(Fs[b].mean, nan=-1.0)
         i, j = np.unravel_index(np.argmax(fb), fb.shape)
         params = {inner_name: float(inner[j])}
-        if method == "correlation":
-            params["c0_min"] = float(outer[i])
+        if outer_name is not None:
+            params[outer_name] = float(outer[i])
         res.rows[b] = TuningRow(
-            method,
+            res.method,
             b,
             params,
             float(P.mean[i, j]),
@@ -278,29 +245,24 @@ class ThresholdCounts:
 def threshold_counts(
     stats: StreamStatistics,
     truth: np.ndarray,
-    method: str = "correlation",
+    method: str | SegmentationMethod = "correlation",
     n: int = 1,
     grid: dict[str, np.ndarray] | None = None,
 ) -> ThresholdCounts:
-    """:class:`ThresholdCounts` of one sequence (the grid of :data:`DEFAULT_GRIDS`)."""
-    if method not in DEFAULT_GRIDS:
-        raise InputError(f"unknown method {method!r}")
-    grid = {**DEFAULT_GRIDS[method], **(grid or {})}
+    """:class:`ThresholdCounts` of one sequence (the method's grid, e.g.
+    :data:`DEFAULT_GRIDS`, with ``grid``'s values instead where given)."""
+    m = make_method(method)
+    outer_name, outer, inner_name, inner = _grid(m, grid)
     t = as_mask(truth, stats.shape, name="truth")
-    if method == "correlation":
-        outer_name, outer = "c0_min", np.asarray(grid["c0_min"], float)
-        inner_name, inner = "r2_min", np.asarray(grid["r2_min"], float)
-    else:
-        outer_name, outer = None, np.array([np.nan])
-        inner_name = "tau_v" if method == "segmentation" else "std_min"
-        inner = np.asarray(grid[inner_name], float)
     tp = np.zeros((len(outer), len(inner)))
     fp = np.zeros_like(tp)
     npos = int(t.sum())
     for i, c in enumerate(outer):
-        score = _scores_for(stats, method, n, None if np.isnan(c) else c)
+        score = m.score(stats, n, None if np.isnan(c) else c)
         tp[i], fp[i], npos = _counts_for_thresholds(score, t, inner)
-    return ThresholdCounts(method, n, outer_name, outer, inner_name, inner, tp, fp, npos)
+    return ThresholdCounts(
+        method_label(method), n, outer_name, outer, inner_name, inner, tp, fp, npos
+    )
 
 
 def tune_counts(counts: Sequence[ThresholdCounts], beta: float) -> tuple[int, int, float]:
