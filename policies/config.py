@@ -36,7 +36,6 @@ from cablesim.perception.segmentation import SegmentationParams
 from cablesim.sim.config import EPISODE_SHORTCUTS, EpisodeConfig
 
 STRATEGIES = ("sampler", "random", "push")
-FLOWS = ("dis", "oracle", "farneback", "raft")
 MERGES = ("dis", "oracle", "none")
 
 
