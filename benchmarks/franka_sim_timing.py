@@ -18,11 +18,15 @@ Two measurements, in one run:
    what the cycle monitor made of it (``CycleViolation.host_timing``), and how often an
    ordinary window of three cycles would meet that rule.
 
+``--clock``: ``realtime`` (franka-sim's own wall-clock pacing: a late client loses cycles) or
+``lockstep`` (the server's default in cablesim: a cycle ends when the client answered it).
 ``--server``: ``default``, ``switch-interval`` (the server's GIL switch interval 0.2 ms instead
 of 5 ms), ``fifo`` (the server at ``SCHED_FIFO`` 50), ``pinned`` (server on CPU 0, client on
 CPU 1).  ``--client``: ``adapter`` (the calling thread keeps its policy, libfranka's goes to the
 control thread) or ``libfranka`` (the calling thread left at libfranka's ``SCHED_FIFO`` 99, as
-before).  ``--load``: two busy processes beside it.  ``--write`` appends the run to
+before).  ``--load``: two busy processes beside it.  ``--stall client|server``: that process
+stopped for 2-12 ms every 50-250 ms (:class:`~cablesim.twin.franka_sim.Stalls`), the descheduling a loaded host does at
+random, on demand.  ``--write`` appends the run to
 ``benchmarks/results/franka_sim_timing.md``.  Needs the franka-sim environment (README "Real
 robot").
 """
@@ -44,7 +48,13 @@ from _machine import cpu_model, git_commit  # noqa: E402  (benchmarks/ is on sys
 
 from cablesim.panda import HOME_QPOS
 from cablesim.robot.franky_panda import FrankyPanda
-from cablesim.twin.franka_sim import HOST, MONITOR_WINDOW, STALL_SPAN_MS, FrankaSimServer
+from cablesim.twin.franka_sim import (
+    HOST,
+    MONITOR_WINDOW,
+    STALL_SPAN_MS,
+    FrankaSimServer,
+    Stalls,
+)
 
 RESULTS = Path(__file__).parent / "results" / "franka_sim_timing.md"
 SERVER_PRELUDES = {
@@ -128,11 +138,20 @@ def session(args: argparse.Namespace, work: Path) -> dict[str, object]:
 
     trace = work / "cycles.txt"
     server = Server(
-        object_width=0.02, enforce_motion_limits=True, lifetime=900, workdir=work, trace=trace
+        object_width=0.02,
+        enforce_motion_limits=True,
+        lifetime=900,
+        workdir=work,
+        trace=trace,
+        clock=args.clock,
     )
     server.start()
+    assert server.running_clock() == args.clock, server.log_text()[-2000:]
     if args.server == "pinned":
         os.sched_setaffinity(0, [1])
+    stalls = None
+    if args.stall != "none":
+        stalls = Stalls(os.getpid() if args.stall == "client" else server.proc.pid).__enter__()
     steal0, t0 = steal_jiffies(), time.monotonic()
     try:
         robot = FrankyPanda(
@@ -150,6 +169,8 @@ def session(args: argparse.Namespace, work: Path) -> dict[str, object]:
         failed = motions(robot, args.rounds)
         robot.close()
     finally:
+        if stalls is not None:
+            stalls.__exit__()
         server.stop()
     seconds = time.monotonic() - t0
     steal = (steal_jiffies() - steal0) / os.sysconf("SC_CLK_TCK")
@@ -189,8 +210,10 @@ def session(args: argparse.Namespace, work: Path) -> dict[str, object]:
 def report(args: argparse.Namespace, wake: dict[str, object], run: dict[str, object]) -> str:
     pub = run["publish_ms"]
     lines = [
-        f"## {datetime.date.today()}: server {args.server}, client {args.client}"
-        f"{', 2 busy processes beside it' if args.load else ''}",
+        f"## {datetime.date.today()}: server {args.server}, {args.clock} clock, "
+        f"client {args.client}"
+        f"{', 2 busy processes beside it' if args.load else ''}"
+        f"{f', the {args.stall} stalled 2-12 ms every 50-250 ms' if args.stall != 'none' else ''}",
         "",
         f"{cpu_model()}, {os.cpu_count()} CPUs, {platform.system()} {platform.release()}, "
         f"commit {git_commit()}, `{' '.join(sys.argv[1:]) or '(defaults)'}`",
@@ -231,7 +254,20 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=6)
     ap.add_argument("--server", choices=sorted(SERVER_PRELUDES), default="default")
     ap.add_argument("--client", choices=["adapter", "libfranka"], default="adapter")
+    ap.add_argument(
+        "--clock",
+        choices=["realtime", "lockstep"],
+        default="realtime",
+        help="the server's clock (FrankaSimServer's clock): franka-sim's wall-clock pacing, "
+        "or cycles that end when the client answered",
+    )
     ap.add_argument("--load", action="store_true", help="two busy processes beside the run")
+    ap.add_argument(
+        "--stall",
+        choices=["none", "client", "server"],
+        default="none",
+        help="stop that process for 2-12 ms every 50-250 ms (twin.franka_sim.Stalls)",
+    )
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
     busy = []

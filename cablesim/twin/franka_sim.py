@@ -31,7 +31,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from cablesim.errors import CablesimError
+from cablesim.errors import CablesimError, InputError
 
 HOST = "127.0.0.1"  # never anything else
 PORTS = (1337, 1338)  # libfranka's arm and gripper ports (fixed by the protocol)
@@ -44,6 +44,7 @@ logging.basicConfig(level=logging.INFO, stream=sys.stdout,
 threading.Timer({lifetime}, lambda: os._exit(3)).start()  # never outlive the caller
 from franka_sim import FrankaSimServer
 {monitor}
+{clock}
 
 def _interrupt(*_):
     raise KeyboardInterrupt
@@ -115,6 +116,42 @@ else:
         close_trace = _trace.close
 """
 
+#: The server's clock in simulated time (``clock="lockstep"``, run inside the server process):
+#: franka-sim paces its state stream to the wall clock and closes a cycle the client has not
+#: answered within 1 ms as lost, extrapolating the motion generator across it, as the FCI does.
+#: On a robot's realtime kernel a client never misses that window; on a shared machine without
+#: one it does (``benchmarks/franka_sim_timing.py``), and the next real command, differenced
+#: against the guess, trips a ``*_discontinuity`` reflex the motion never caused.  In lockstep
+#: the publish loop's drain gate (``MotionSessionMixin._drain_gate``, which already holds a
+#: state back until the answer to the last one is applied, for at most one period) holds it
+#: for up to :data:`LOCKSTEP_WAIT` seconds instead: a cycle ends when the client has answered
+#: it, so the robot's time (the state's ``message_id``, which libfranka reads as its clock in
+#: ms) advances one cycle per answered state however late the host runs either process.
+#: Nothing else changes: every motion limit is still checked on every command, and a client
+#: that stops answering for longer than the wait still loses cycles (20 in a row abort the
+#: motion with ``communication_constraints_violation``).  Where franka-sim's internals differ,
+#: the server logs that lockstep is unavailable and runs on the wall clock.
+_LOCKSTEP = """
+try:
+    from franka_sim.server.motion_session import MotionSessionMixin as _Session
+    _gate = _Session._drain_gate
+except (ImportError, AttributeError) as exc:
+    logging.getLogger("cablesim.clock").warning("cablesim-clock: lockstep unavailable (%s)", exc)
+else:
+    def _lockstep_gate(self, answer_deadline=0.0):
+        return _gate(self, answer_deadline=answer_deadline + {wait})
+
+    _Session._DRAIN_GATE_TIMEOUT = {wait}
+    _Session._drain_gate = _lockstep_gate
+    logging.getLogger("cablesim.clock").info("cablesim-clock: lockstep (wait %.3f s)", {wait})
+"""
+
+#: Longest a lockstep server waits for the client's answer to a state (s) before it closes the
+#: cycle as lost; libfranka gives up on a silent robot far later than this.
+LOCKSTEP_WAIT = 0.25
+#: The server clocks :class:`FrankaSimServer` offers (``clock``).
+CLOCKS = ("lockstep", "realtime")
+
 #: Cycles the monitor looks back from a violation.
 MONITOR_WINDOW = 3
 #: A state stream slower than this over the monitor's window (ms for MONITOR_WINDOW cycles,
@@ -157,6 +194,57 @@ def parse_cycle_violations(log_text: str) -> list[CycleViolation]:
             record = json.loads("{" + payload)
             out.append(CycleViolation(**record))
     return out
+
+
+_STALLER = """
+import os, random, signal, sys, time
+pid, rng = int(sys.argv[1]), random.Random(int(sys.argv[2]))
+lo, hi, gap_lo, gap_hi = map(float, sys.argv[3:7])
+try:
+    while True:
+        time.sleep(rng.uniform(gap_lo, gap_hi))
+        os.kill(pid, signal.SIGSTOP)
+        time.sleep(rng.uniform(lo, hi))
+        os.kill(pid, signal.SIGCONT)
+except ProcessLookupError:
+    pass
+"""
+
+
+class Stalls:
+    """Stop a process (SIGSTOP) for ``stall`` seconds every ``every`` seconds (uniform ranges,
+    seeded), as a hypervisor or a busy neighbour deschedules a process on a loaded machine:
+    what such a host does at random, on demand.  A context manager; the process is always
+    continued when it ends.
+
+        with Stalls(os.getpid()):   # this process: the libfranka control thread misses cycles
+            robot.move_relative(...)
+    """
+
+    def __init__(
+        self,
+        pid: int,
+        seed: int = 7,
+        stall: tuple[float, float] = (0.002, 0.012),
+        every: tuple[float, float] = (0.05, 0.25),
+    ) -> None:
+        self.pid, self.seed, self.stall, self.every = pid, seed, stall, every
+        self._proc: subprocess.Popen[bytes] | None = None
+
+    def __enter__(self) -> Stalls:
+        args = [str(self.pid), str(self.seed), *map(str, (*self.stall, *self.every))]
+        self._proc = subprocess.Popen([sys.executable, "-c", _STALLER, *args])
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._proc is not None:
+            self._proc.kill()
+            self._proc.wait()
+            self._proc = None
+        try:
+            os.kill(self.pid, signal.SIGCONT)
+        except ProcessLookupError:
+            pass
 
 
 class FrankaSimUnavailable(CablesimError, RuntimeError):
@@ -210,6 +298,10 @@ class FrankaSimServer:
     ordinary slow motions on this model, so that one check is loosened by default.
     ``trace``: a file the server appends every state cycle to (``time message_id active
     lost``), written when it stops; for ``benchmarks/franka_sim_timing.py``.
+    ``clock``: ``"lockstep"`` (default: a cycle ends when the client has answered it, so a
+    host that runs either process late slows the robot's time down instead of losing cycles;
+    see ``_LOCKSTEP``) or ``"realtime"`` (franka-sim's own 1 kHz wall-clock pacing, where a
+    late client loses cycles as on the robot; for measuring this host's timing).
     :meth:`cycle_violations` reads the cycle monitor's record of every motion-limit violation
     (``_MONITOR``), which tells a reflex caused by this host's timing from one caused by the
     motion (:attr:`CycleViolation.host_timing`).
@@ -228,7 +320,11 @@ class FrankaSimServer:
         stop_timeout: float = 20.0,
         workdir: str | os.PathLike[str] | None = None,
         trace: str | os.PathLike[str] | None = None,
+        clock: str = "lockstep",
     ) -> None:
+        if clock not in CLOCKS:
+            raise InputError(f"clock: {clock!r} is not one of {', '.join(CLOCKS)}")
+        self.clock = clock
         self.object_width = object_width
         self.enforce_motion_limits = bool(enforce_motion_limits)
         self.joint_discontinuity_scale = float(joint_discontinuity_scale)
@@ -280,6 +376,7 @@ class FrankaSimServer:
                 monitor=_MONITOR.format(
                     window=MONITOR_WINDOW, trace=str(self.trace) if self.trace else ""
                 ),
+                clock=_LOCKSTEP.format(wait=LOCKSTEP_WAIT) if self.clock == "lockstep" else "",
             )
         )
         self.log = work / "server.log"
@@ -315,6 +412,11 @@ class FrankaSimServer:
     def cycle_violations(self) -> list[CycleViolation]:
         """Every motion-limit violation the server's cycle monitor logged so far."""
         return parse_cycle_violations(self.log_text())
+
+    def running_clock(self) -> str:
+        """The clock the server reported it runs on: ``"lockstep"`` or ``"realtime"`` (also
+        where lockstep was asked for but franka-sim's internals did not allow it)."""
+        return "lockstep" if "cablesim-clock: lockstep (" in self.log_text() else "realtime"
 
     def stop(self) -> None:
         """Interrupt the server (SIGINT, then SIGKILL after ``stop_timeout``)."""

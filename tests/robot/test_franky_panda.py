@@ -8,7 +8,9 @@ so the server runs as a subprocess from its own environment: the Python named by
 bound to 127.0.0.1 only (its command line binds all interfaces, so it is started from Python),
 on libfranka's fixed ports 1337 (arm) and 1338 (gripper); the tests skip when those are taken.
 Only loopback is ever contacted.  The server model is :func:`franka_sim_mjcf` (our Panda), with
-``enforce_motion_limits`` on so that it raises reflexes like the robot does.
+``enforce_motion_limits`` on so that it raises reflexes like the robot does, on the lockstep
+clock (a cycle ends when the client answered it), so that this host's late scheduling of the
+control thread cannot abort a motion (``test_franka_sim_clock.py``).
 """
 
 from __future__ import annotations
@@ -97,6 +99,8 @@ def franka_sim_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Fran
     except FrankaSimUnavailable as e:
         pytest.skip(str(e))
     try:
+        # in lockstep a late client loses no cycle (test_franka_sim_clock.py)
+        assert server.running_clock() == "lockstep", server.log_text()[-2000:]
         yield server
     finally:
         server.stop()
