@@ -23,13 +23,16 @@ if [ ${#need_debs[@]} -gt 0 ]; then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_debs[@]}" >/dev/null
 fi
 
+# pip's output less its location warnings; pip's own exit status stands (pipefail)
+quiet_pip() { grep -v '^WARNING: Location' || true; }
+
 PY="${PYTHON:-python3.11}"
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 if [ ! -x .venv/bin/python ]; then
   echo "[setup] creating .venv with $PY"
   "$PY" -m venv .venv
 fi
-.venv/bin/python -m pip install -q --upgrade pip 2>&1 | grep -v '^WARNING: Location' || true
+.venv/bin/python -m pip install -q --upgrade pip 2>&1 | quiet_pip
 spec="."
 case "$extras" in
   dev) spec=".[dev,torch]" ;;
@@ -39,13 +42,15 @@ esac
 echo "[setup] installing cablesim $spec"
 # setuptools notes every editable install ("Editable installation. Please be careful with
 # folders ... with the same name as your package"): advice, not a problem of this project
+# with the versions the tests and pinned results were made with (scripts/constraints.txt)
 PYTHONWARNINGS="ignore:Editable installation" \
-  .venv/bin/python -m pip install -q -e "$spec" 2>&1 | grep -v '^WARNING: Location' || true
+  .venv/bin/python -m pip install -q -c scripts/constraints.txt -e "$spec" 2>&1 | quiet_pip
 if [ "$extras" = "dev" ] && [ ! -x .cache/franka-sim-venv/bin/python ]; then
   # the franka-sim test server for the real-robot adapter needs mujoco 3.2 and numpy 1.26:
   # it gets an environment of its own (tests/robot/test_franky_panda.py looks for it here)
   echo "[setup] installing the franka-sim test server into .cache/franka-sim-venv"
   "$PY" -m venv .cache/franka-sim-venv
-  .cache/franka-sim-venv/bin/python -m pip install -q franka-sim==1.1.7 2>&1 | grep -v '^WARNING: Location' || true
+  .cache/franka-sim-venv/bin/python -m pip install -q -c scripts/constraints-franka-sim.txt \
+    franka-sim==1.1.7 2>&1 | quiet_pip
 fi
 .venv/bin/python -c "import cablesim, mujoco; print('[setup] cablesim', cablesim.__version__, 'mujoco', mujoco.__version__, 'GL', cablesim.gl.select_backend())"

@@ -187,3 +187,35 @@ def test_the_installed_wheel_runs_scene_outside_the_checkout(
     for name in ("rgb.png", "labels.npy", "depth.npy", "flow.npy", "rgb_moved.png"):
         a = (work / "installed" / name).read_bytes()
         assert a == (tmp_path / "checkout" / name).read_bytes(), name
+
+
+def _pins(path: Path) -> dict[str, str]:
+    pins = {}
+    for line in path.read_text().splitlines():
+        line = line.split("#")[0].strip()
+        if line:
+            name, _, version = line.partition("==")
+            pins[re.sub(r"[-_.]+", "-", name).lower()] = version
+    return pins
+
+
+def test_the_environment_is_the_one_the_results_were_pinned_in() -> None:
+    """Every package this environment shares with ``scripts/constraints.txt`` has the version
+    written there (``setup.sh`` installs with it): the pinned result hashes depend on them
+    (OpenCV 5.1 instead of 5.0 changes PNG bytes and flow)."""
+    from importlib import metadata
+
+    pins = _pins(ROOT / "scripts" / "constraints.txt")
+    assert {"numpy", "opencv-python-headless", "mujoco", "scipy"} <= set(pins)
+    installed = {
+        re.sub(r"[-_.]+", "-", d.metadata["Name"]).lower(): d.version
+        for d in metadata.distributions()
+    }
+    drift = {n: (installed[n], v) for n, v in pins.items() if n in installed and installed[n] != v}
+    assert not drift, (
+        f"installed vs scripts/constraints.txt: {drift}; run bash scripts/setup.sh dev"
+    )
+
+
+def test_constraints_parse() -> None:
+    assert _pins(ROOT / "scripts" / "constraints-franka-sim.txt")["franka-sim"] == "1.1.7"

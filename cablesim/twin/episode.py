@@ -39,6 +39,7 @@ from cablesim.perception.metrics import grade_proposal
 from cablesim.perception.pipeline import StreamSegmentation, segment_stream
 from cablesim.progress import Say, quiet
 from cablesim.sim.config import EpisodeConfig
+from cablesim.twin.franka_sim import HOST
 
 #: FrankyPanda settings against franka-sim: its Cartesian tracking lags a few millimetres, and
 #: there is no realtime kernel here (the real robot keeps the adapter's defaults).
@@ -190,7 +191,7 @@ class TwinEpisode:
 
 def twin_episode(
     config: EpisodeConfig,
-    host: str = "127.0.0.1",
+    host: str = HOST,
     fps: float = 15.0,
     method: str = "correlation",
     flow: str = "dis",

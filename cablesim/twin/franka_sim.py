@@ -1,7 +1,7 @@
 """A ``franka-sim`` server on 127.0.0.1 serving our Panda: the robot end of the digital twin.
 
     with FrankaSimServer(object_width=0.015) as server:     # started, ready for a client
-        robot = FrankyPanda("127.0.0.1", T_world_camera, T_world_base, realtime=False)
+        robot = FrankyPanda(server.host, T_world_camera, T_world_base, realtime=False)
 
 franka-sim 1.1.7 speaks libfranka's protocol (arm on port 1337, gripper on 1338) but needs
 mujoco 3.2 and numpy 1.26, which clash with this project's mujoco 4.0, so it runs as a
@@ -20,6 +20,7 @@ missing or the ports are taken, so that callers (tests) can skip.
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
 import signal
@@ -33,7 +34,24 @@ from pathlib import Path
 
 from cablesim.errors import CablesimError, InputError
 
-HOST = "127.0.0.1"  # never anything else
+
+def _loopback_host() -> str:
+    """``$CABLESIM_FRANKA_SIM_HOST`` (default 127.0.0.1), which must be a loopback address:
+    several servers can run side by side on 127.0.0.2, 127.0.0.3, ... (one per test worker),
+    each with libfranka's fixed ports, and none is ever reachable from another machine."""
+    host = os.environ.get("CABLESIM_FRANKA_SIM_HOST", "127.0.0.1")
+    try:
+        loopback = ipaddress.IPv4Address(host).is_loopback
+    except ValueError:
+        loopback = False
+    if not loopback:
+        raise InputError(
+            f"CABLESIM_FRANKA_SIM_HOST: {host!r} is not a loopback address (127.0.0.0/8)"
+        )
+    return host
+
+
+HOST = _loopback_host()  # loopback only, never anything else
 PORTS = (1337, 1338)  # libfranka's arm and gripper ports (fixed by the protocol)
 REPO = Path(__file__).resolve().parents[2]
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import os
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -93,13 +94,16 @@ class RetryingPanda:
             violations = self._violations_since(seen, result)
             if not is_host_timing(result, violations):
                 break
-            RETRIES.append(
-                Retry(
-                    os.environ.get("PYTEST_CURRENT_TEST", "?").split(" ")[0],
-                    motion,
-                    result.reason.replace("\n", " "),
-                    tuple(violations),
-                )
+            retry = Retry(
+                os.environ.get("PYTEST_CURRENT_TEST", "?").split(" ")[0],
+                motion,
+                result.reason.replace("\n", " "),
+                tuple(violations),
+            )
+            RETRIES.append(retry)
+            # also a warning: under pytest-xdist the summary (conftest.py) runs elsewhere
+            warnings.warn(
+                f"franka-sim host-timing retry: {retry.motion}: {retry.reason}", stacklevel=2
             )
             seen += len(violations)
             result = run()

@@ -18,6 +18,7 @@ from cablesim.calibration import FORMAT, VERSION
 from cablesim.cli import main
 from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
 from cablesim.sim.session import SimSession
+from cablesim.twin.franka_sim import HOST
 
 pytest.importorskip("franky", reason="franky-control is not installed (the 'real' extra)")
 pytest.importorskip("pyrealsense2", reason="pyrealsense2 is not installed (the 'real' extra)")
@@ -45,7 +46,7 @@ def server():
 def _joints(T_world_camera: np.ndarray, T_world_base: np.ndarray) -> np.ndarray:
     from cablesim.robot.franky_panda import FrankyPanda
 
-    robot = FrankyPanda("127.0.0.1", T_world_camera, T_world_base, realtime=False)
+    robot = FrankyPanda(HOST, T_world_camera, T_world_base, realtime=False)
     q = robot.joint_positions
     robot.close()
     del robot
@@ -81,7 +82,7 @@ def test_dry_run_plans_without_moving(server, tmp_path):
     )
     before = _joints(T_world_camera, T_world_base)
     out = tmp_path / "plan"
-    argv = ["explore", "--robot", "franky", "--robot-host", "127.0.0.1", "--no-realtime"]
+    argv = ["explore", "--robot", "franky", "--robot-host", HOST, "--no-realtime"]
     argv += ["--camera", f"realsense:{tmp_path / 'scene.db3'}"]
     argv += ["--calibration", str(tmp_path / "calib.json"), "--start", str(tmp_path / "start.png")]
     argv += ["--periods", "1", "--dry-run", "--out", str(out), "--quiet"]
@@ -103,7 +104,7 @@ def test_dry_run_plans_without_moving(server, tmp_path):
 
 
 def test_missing_calibration_is_refused_before_connecting(tmp_path):
-    argv = ["explore", "--robot", "franky", "--robot-host", "127.0.0.1", "--out", str(tmp_path)]
+    argv = ["explore", "--robot", "franky", "--robot-host", HOST, "--out", str(tmp_path)]
     assert main([*argv, "--start-point", "10,10"]) == 2  # no --calibration
     argv += ["--calibration", str(tmp_path / "nope.json"), "--start-point", "10,10"]
     assert main(argv) == 2
