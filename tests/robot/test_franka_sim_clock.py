@@ -61,7 +61,7 @@ def _session(clock: str, work) -> tuple[list, int, str]:
             rotation_tolerance=0.05,
             joint_tolerance=0.02,
             motion_timeout=15.0,
-            settle_time=2.0,
+            settle_time=10.0,  # the wait ends when reached; a loaded host runs the arm slow
         )
         try:
             home = robot.home(0.5)  # before the stalls

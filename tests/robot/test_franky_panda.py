@@ -135,7 +135,7 @@ def robot(franka_sim_server: FrankaSimServer) -> Iterator[RetryingPanda]:
         rotation_tolerance=0.05,
         joint_tolerance=0.02,
         motion_timeout=15.0,
-        settle_time=2.0,  # the simulated arm runs slower than real time on a loaded host
+        settle_time=10.0,  # the simulated arm runs slower than real time on a loaded host
     )
     yield RetryingPanda(panda, franka_sim_server)
     panda.close()
