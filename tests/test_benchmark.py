@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cablesim.benchmark import explore_thresholds
-from cablesim.benchmark import report as rp
-from cablesim.benchmark.config import SceneSize, ThesisConfig
+from cablesim.thesis import explore_thresholds
+from cablesim.thesis import report as rp
+from cablesim.thesis.config import SceneSize, ThesisConfig
 from cablesim.cli import main
 from cablesim.errors import ConfigError
 from cablesim.perception.metrics import mean_scores, score_mask

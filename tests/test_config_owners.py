@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cablesim.benchmark.config import SceneSize, ThesisConfig
+from cablesim.thesis.config import SceneSize, ThesisConfig
 from cablesim.cli import main
 from cablesim.config import ConfigMigrationWarning, flatten, replace_paths
 from cablesim.dataset.randomize import Randomization

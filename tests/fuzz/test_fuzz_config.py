@@ -12,7 +12,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cablesim.benchmark.config import ThesisConfig
+from cablesim.thesis.config import ThesisConfig
 from cablesim.config import from_dict, to_dict
 from cablesim.dataset.randomize import Randomization
 from cablesim.envs.hose_explore import HoseExploreConfig

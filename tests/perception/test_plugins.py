@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cablesim.benchmark.config import ThesisConfig
+from cablesim.thesis.config import ThesisConfig
 from cablesim.cli import main
 from cablesim.errors import ConfigError, InputError
 from cablesim.perception import (

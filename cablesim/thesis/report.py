@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from cablesim.benchmark import reference as ref
+from cablesim.thesis import reference as ref
 from cablesim.perception.metrics import nanmean
 from cablesim.perception.tuning import ThresholdCounts, tune_counts
 

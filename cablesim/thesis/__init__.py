@@ -1,11 +1,11 @@
 """``cablesim benchmark thesis``: the protocol of thesis chapters 5 and 6 in simulation.
 
-    from cablesim.benchmark import ThesisConfig, run_thesis
+    from cablesim.thesis import ThesisConfig, run_thesis
     report = run_thesis(ThesisConfig(validation=(1000, 1008), test=(2000, 2012)))
 
 1. Interactions (tables 6.4/6.5): every validation and test scene, with and without the
    neighbour perturbation, one grasp and two actions; for each flow back end the three methods'
-   confusion counts over their threshold grids (:mod:`cablesim.benchmark.scene`).  ``flows``
+   confusion counts over their threshold grids (:mod:`cablesim.thesis.scene`).  ``flows``
    and ``methods`` take any spec of the registries (a plug-in's name or ``MODULE:CLASS``,
    ``docs/plugins.md``): a user's flow back end or method gets its own rows.  Thresholds
    are tuned per beta on validation and scored on test (SPEC section 7).
@@ -34,8 +34,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from cablesim.benchmark import report as rp
-from cablesim.benchmark.config import METHODS, SceneSize, ThesisConfig
+from cablesim.thesis import report as rp
+from cablesim.thesis.config import METHODS, SceneSize, ThesisConfig
 from cablesim.files import OutputLock, write_text
 from cablesim.jobs import Summary, execute, load_results, ray_init, ray_shutdown
 from cablesim.jsonutil import json_default
