@@ -86,8 +86,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def config_from_args(args: argparse.Namespace):
     """``ThesisConfig()`` or ``--config FILE``, then the flags given, then ``--set``."""
-    from cablesim.thesis import ThesisConfig
     from cablesim.jobs import parse_range
+    from cablesim.thesis import ThesisConfig
 
     values: dict[str, object] = {}
     for name in ("validation", "test", "clip_validation", "clip_test"):
