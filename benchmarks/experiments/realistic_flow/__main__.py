@@ -1,7 +1,8 @@
 """Realistic flow: motion correlation with the CPU flow on recorded, noisy, perturbed scenes.
 
-    nice -n 10 .venv/bin/python benchmarks/realistic_flow.py record      # simulate (resumable)
-    nice -n 10 .venv/bin/python benchmarks/realistic_flow.py evaluate    # perception + tables
+    # simulate (resumable), then perception and tables
+    nice -n 10 .venv/bin/python -m benchmarks.experiments.realistic_flow record
+    nice -n 10 .venv/bin/python -m benchmarks.experiments.realistic_flow evaluate
 
 ``record`` simulates one grasp interaction per scene (perturbed neighbours, arm masks, ground
 truth; validation seeds from 300, test seeds from 700, the first scenes whose interaction
@@ -17,21 +18,16 @@ on the test scenes in ``benchmarks/results/realistic_flow.md`` and ``.json``.
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import os
-import platform
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _machine import cpu_model  # noqa: E402
-from _rf_eval import (  # noqa: E402
+from benchmarks import RESULTS
+from benchmarks.experiments.realistic_flow.evaluate import (
     BETAS,
     FLOWS,
     SAMPLES,
@@ -46,7 +42,8 @@ from _rf_eval import (  # noqa: E402
     tune,
     union_mask,
 )
-from _rf_record import GEOMETRIES, Scene, record, recorded  # noqa: E402
+from benchmarks.experiments.realistic_flow.record import GEOMETRIES, Scene, record, recorded
+from cablesim import provenance as pv
 
 # scene counts: what a shared 2-core machine allowed (one interaction ~45 s CPU to simulate)
 VAL_SEEDS, VAL_WANT, VAL_SOLID = range(300, 400), 12, 6
@@ -54,7 +51,6 @@ VAL_SEEDS, VAL_WANT, VAL_SOLID = range(300, 400), 12, 6
 # projection) were chosen (seeds 400-411 were looked at while the remedies were developed;
 # 600-614, 700-714 and 800-811 were scored once for earlier reports and then retired)
 TEST_SEEDS, TEST_WANT, TEST_SOLID = range(900, 1000), 12, 6
-RESULTS = Path(__file__).resolve().parent / "results"
 
 # candidates measured on the validation scenes (noisy): flow back end -> per-sample variants
 EXPLORE_PLAN: dict[str, list[str]] = {
@@ -285,9 +281,8 @@ def main() -> None:
     val, test = vw + vs, tw + ts
     log(f"validation: {len(vw)} wood + {len(vs)} solid; test: {len(tw)} wood + {len(ts)} solid")
     report: dict[str, Any] = {
-        "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        **pv.provenance(),
         "geometry": args.geometry,
-        "machine": f"{platform.platform()}, CPU {cpu_model()}, {os.cpu_count()} cores",
         "scenes": {
             "val_wood": [s.seed for s in vw],
             "val_solid": [s.seed for s in vs],
@@ -353,7 +348,7 @@ def main() -> None:
 
 
 def render(rep: dict[str, Any]) -> str:
-    from _rf_report import render as _render
+    from benchmarks.experiments.realistic_flow.report import render as _render
 
     return _render(rep)
 

@@ -1,4 +1,5 @@
-"""Perception half of ``benchmarks/realistic_flow.py``: variants on the recorded streams.
+"""Perception half of ``python -m benchmarks.experiments.realistic_flow``: variants on the
+recorded streams.
 
 A recorded stream is read lean (RGB, arm mask and gripper of every frame; depth and labels of
 the target only), optionally given the camera's noise models (:mod:`cablesim.sim.sensor`,
@@ -22,8 +23,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _rf_record import CACHE, TAG, Scene
 
+from benchmarks.experiments.realistic_flow.record import CACHE, TAG, Scene
 from cablesim.perception.actions import action_direction
 from cablesim.perception.correlation import (
     CorrelationAccumulator,
