@@ -41,6 +41,7 @@ from benchmarks.experiments.realistic_flow.evaluate import (
     support_for,
     tune,
     union_mask,
+    validation_scores,
 )
 from benchmarks.experiments.realistic_flow.record import GEOMETRIES, Scene, record, recorded
 from cablesim import provenance as pv
@@ -149,7 +150,7 @@ def explore_rows(val: list[Scene], plan, supports, log) -> list[dict[str, Any]]:
                     sts.append(st)
                 truths = [targets[s.name].truth for s in val]
                 tuned = tune(sts, truths, "correlation")
-                pr = tuned.params[0.4]
+                pr = tuned.rows[0.4].params
                 preds = [union_mask(st, "correlation", pr) for st in sts]
                 row = {"flow": flow, "sample": sample, "support": sup, "params": pr}
                 for board in ("wood", "solid", "all"):
@@ -182,9 +183,9 @@ def evaluate_combo(
     out: dict[str, Any] = {"combo": list(combo), "noisy": noisy, "methods": {}}
     for method in METHODS:
         tuned = tune([v[0] for v in vs], [v[1].truth for v in vs], method)
-        res: dict[str, Any] = {"params": {str(b): tuned.params[b] for b in BETAS}, "test": {}}
+        res: dict[str, Any] = {"params": {str(b): tuned.rows[b].params for b in BETAS}, "test": {}}
         for b in BETAS:
-            preds = [union_mask(st, method, tuned.params[b]) for st, _ in ts]
+            preds = [union_mask(st, method, tuned.rows[b].params) for st, _ in ts]
             truths = [tg.truth for _, tg in ts]
             per = {}
             for board in ("wood", "solid", "all"):
@@ -192,7 +193,7 @@ def evaluate_combo(
                 per[board] = score_row([preds[i] for i in idx], [truths[i] for i in idx], b)
             if b == 0.4:
                 per["fp_near_hose"] = fp_near_hose(preds, [tg for _, tg in ts])
-                per["val"] = tuned.val[b]
+                per["val"] = validation_scores(tuned.rows[b])
             res["test"][str(b)] = per
         out["methods"][method] = res
     return out

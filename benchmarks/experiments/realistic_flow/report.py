@@ -74,7 +74,8 @@ def render(rep: dict[str, Any]) -> str:
         "- thresholds tuned per beta on the validation scenes of the same noise setting (all "
         "boards together), union of the two actions; means over scenes: precision over non-empty "
         "predictions (an empty prediction has no precision; `empty` counts them), recall, "
-        "F_beta (0 for an empty prediction) and IoU over all",
+        "F_beta (0 for an empty prediction) and IoU over all (`cablesim.perception.metrics`: "
+        "a score is NaN and left out only where it is undefined)",
         "- a configuration is `flow back end` / `per-sample checks` / `target support`: "
         "`raw` = the flow as it comes, `arm` = arm masks, `photoN` = photometric check at N "
         "grey levels, `fb1` = forward-backward at 1 px; `fg` = depth foreground, `fg-cN` = "
