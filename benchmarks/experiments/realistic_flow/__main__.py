@@ -12,7 +12,9 @@ variants on the recorded streams (flow once per stream and back end, cached stat
 with the camera's noise models (``CameraConfig.realistic()``: RGB sensor noise, stereo-like
 depth) applied to the recorded clean images and, beside them, noise-free; tunes the
 thresholds per beta on the validation scenes (SPEC 7, union of the two actions) and reports
-on the test scenes in ``benchmarks/results/realistic_flow.md`` and ``.json``.
+on the test scenes in ``benchmarks/results/realistic_flow.md``, with its numbers in
+``realistic_flow.summary.json`` (:func:`summary`) and every number, per scene, in
+``realistic_flow.json`` (not committed: up to 1 MB, written again by ``evaluate``).
 """
 
 from __future__ import annotations
@@ -343,9 +345,34 @@ def main() -> None:
     report["load"] = {"start": load0, "end": os.getloadavg()}
     report["seconds"] = time.time() - t_start
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps(report, indent=1, default=float))
+    raw, small = args.out.with_suffix(".json"), summary_path(args.out)
+    raw.write_text(json.dumps(report, indent=1, default=float))  # not committed: .gitignore
+    small.write_text(json.dumps(summary(report), indent=1, default=float) + "\n")
     args.out.write_text(render(report))
-    log(f"wrote {args.out} and {args.out.with_suffix('.json')}")
+    log(f"wrote {args.out}, {small} and (every number) {raw}")
+
+
+def summary_path(md: Path) -> Path:
+    """Where the small JSON summary of the report ``md`` goes: ``<name>.summary.json``."""
+    return md.with_name(md.stem + ".summary.json")
+
+
+def summary(report: dict[str, Any], digits: int = 4) -> dict[str, Any]:
+    """The report's JSON without what only the raw file needs: no per-scene scores, no
+    validation exploration, no per-frame timings; scores rounded to ``digits``.  What the
+    markdown tables show stays (means, tuned thresholds, empty counts, proposals)."""
+    drop = {"per_scene", "explore", "timings_cpu_ms_per_frame"}
+
+    def small(x: Any) -> Any:
+        if isinstance(x, dict):
+            return {k: small(v) for k, v in x.items() if k not in drop}
+        if isinstance(x, list | tuple):
+            return [small(v) for v in x]
+        if isinstance(x, float):
+            return round(x, digits)
+        return x
+
+    return small(report)
 
 
 def render(rep: dict[str, Any]) -> str:
