@@ -23,7 +23,7 @@ import time
 import mujoco
 import numpy as np
 
-from benchmarks import RESULTS
+from benchmarks import RESULTS, write_results
 from cablesim import provenance as pv
 from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses
 from cablesim.perception.frames import LABEL_ROBOT
@@ -122,10 +122,8 @@ def main() -> None:
         *[f"| {a} | {b} | {c} |" for a, b, c in rows],
         "",
     ]
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text("\n".join(lines))
     print("\n".join(lines))
-    print(f"[bench] wrote {OUT}")
+    write_results(OUT, "\n".join(lines))
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ import cv2
 import mujoco
 import numpy as np
 
-from benchmarks import RESULTS
+from benchmarks import RESULTS, write_results
 from cablesim import provenance as pv
 from cablesim.sim.camera import SimCamera
 from cablesim.sim.config import SceneConfig
@@ -132,10 +132,8 @@ def main() -> None:
         *[f"| {a} | {b} | {c} |" for a, b, c in rows],
         "",
     ]
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text("\n".join(lines))
     print("\n".join(lines))
-    print(f"[bench] wrote {OUT}")
+    write_results(OUT, "\n".join(lines))
 
 
 if __name__ == "__main__":
