@@ -32,16 +32,16 @@ from cablesim.sim.session import SimSession
 METHODS = ("correlation", "segmentation")
 
 
-def run_seed(seed: int, perturb: bool, flow: str) -> dict:
+def score_seed(seed: int, perturb: bool, flow: str) -> dict:
     """One seed's row; a failure of any kind is recorded by its named outcome, not raised, so
     that the run goes on with the next seed."""
     try:
-        return _run_seed(seed, perturb, flow)
+        return _score_seed(seed, perturb, flow)
     except Exception as e:
         return {"seed": seed, "perturb": perturb, "error": f"{outcome_of(e)}: {e}"}
 
 
-def _run_seed(seed: int, perturb: bool, flow: str) -> dict:
+def _score_seed(seed: int, perturb: bool, flow: str) -> dict:
     session = SimSession.build(EpisodeConfig.of(seed=seed, perturb=PerturbConfig(enabled=perturb)))
     try:
         seg = session.pick_start()
@@ -107,7 +107,7 @@ def main() -> None:
     for perturb in modes:
         for seed in args.seeds:
             t = time.time()
-            r = run_seed(seed, perturb, args.flow)
+            r = score_seed(seed, perturb, args.flow)
             rows.append(r)
             msg = r.get("error") or " ".join(
                 f"{m}: P {r[m][0]:.3f} R {r[m][1]:.3f} F0.4 {r[m][2]:.3f}" for m in METHODS
