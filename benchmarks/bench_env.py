@@ -24,9 +24,6 @@ Resets are included (the scene is built and cached before timing).  CPU time of 
 
 from __future__ import annotations
 
-import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
-
-# isort: split
 import argparse
 import os
 import resource

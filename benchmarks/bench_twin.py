@@ -16,9 +16,6 @@ the server share the CPU with everything else.  ``--write`` writes
 
 from __future__ import annotations
 
-import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
-
-# isort: split
 import argparse
 import json
 import os

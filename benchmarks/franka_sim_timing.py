@@ -33,9 +33,6 @@ robot").
 
 from __future__ import annotations
 
-import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
-
-# isort: split
 import argparse
 import datetime
 import os

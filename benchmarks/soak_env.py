@@ -12,9 +12,6 @@ writes ``benchmarks/results/soak.md``.
 
 from __future__ import annotations
 
-import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
-
-# isort: split
 import argparse
 import math
 import os
