@@ -223,7 +223,9 @@ def votes_for(st, method: str, params: dict[str, float]) -> np.ndarray:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.experiments.realistic_flow", description=__doc__
+    )
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("record")
     r.add_argument("--workers", type=int, default=2)
