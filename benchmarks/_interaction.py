@@ -18,27 +18,22 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import platform
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from _machine import cpu_model, git_commit  # noqa: E402  (benchmarks/ is on sys.path)
+
+from cablesim import provenance
 
 
 def single_thread_environment() -> None:
-    """One thread per process for BLAS, OpenCV and software OpenGL (llvmpipe renders in the
-    calling thread with ``LP_NUM_THREADS=0``).  Call before cablesim is imported."""
-    for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(k, "1")
+    """Software OpenGL in the calling thread (llvmpipe with ``LP_NUM_THREADS=0``), as BLAS
+    and OpenCV (:mod:`benchmarks._env`).  Call before the first rendering; worker processes
+    started afterwards inherit it."""
     os.environ.setdefault("LP_NUM_THREADS", "0")
-    import cv2
-
-    cv2.setNumThreads(1)
 
 
 def pin_to_one_core(core: int | None = None) -> int | None:
@@ -112,19 +107,6 @@ def stream_digest(stream: Any, votes: np.ndarray | None) -> str:
     return h.hexdigest()
 
 
-def episode_config(assignments: Sequence[str] = (), seed: int = 0) -> Any:
-    """The default ``EpisodeConfig`` of ``seed`` with ``FIELD=VALUE`` assignments applied (the
-    fields of ``cablesim explore --show-config`` without their ``episode.`` prefix), checked;
-    a bad field or value raises ``cablesim.errors.ConfigError`` naming it."""
-    from cablesim.config import override
-    from cablesim.sim.config import EpisodeConfig
-
-    cfg = EpisodeConfig.of(seed=seed)
-    for assignment in assignments:
-        cfg = override(cfg, assignment)
-    return cfg
-
-
 def run_interaction(session: Any, segment_mask: np.ndarray, perception: bool = True) -> Any:
     """One interaction of ``session`` at ``segment_mask``, then perception; timed by stage."""
     import cablesim.sim.flow_gt as flow_gt
@@ -176,24 +158,13 @@ def run_interaction(session: Any, segment_mask: np.ndarray, perception: bool = T
     return run, res, seg
 
 
-def load_average() -> str:
-    try:
-        return ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    except OSError:
-        return "unknown"
-
-
 def uptime() -> str:
     try:
         return subprocess.run(
             ["uptime"], capture_output=True, text=True, check=False
         ).stdout.strip()
     except OSError:
-        return f"load average {load_average()}"
-
-
-def machine_line() -> str:
-    return f"{platform.platform()}, {cpu_model()}, {os.cpu_count()} cores"
+        return f"load average {provenance.load_average()}"
 
 
 def versions_line() -> str:
@@ -212,14 +183,6 @@ def versions_line() -> str:
 
 
 def run_meta(**extra: Any) -> dict[str, Any]:
-    """What every benchmark result records about its run: date, commit, machine and versions,
-    then ``extra``."""
-    import datetime
-
-    return {
-        "date": datetime.datetime.now().isoformat(timespec="seconds"),
-        "commit": git_commit(),
-        "machine": machine_line(),
-        "versions": versions_line(),
-        **extra,
-    }
+    """What every benchmark result records about its run: date, commit, machine
+    (:func:`cablesim.provenance.provenance`) and versions, then ``extra``."""
+    return provenance.provenance(versions=versions_line(), **extra)

@@ -1,6 +1,6 @@
 """Throughput of the Gymnasium environments: environment steps per CPU second on one core.
 
-    .venv/bin/python benchmarks/bench_env.py [--episodes 3] [--write]
+    .venv/bin/python -m benchmarks.bench_env [--episodes 3] [--write]
 
 Every step is a full simulated interaction, so the cost depends on what the action does: an
 action that reaches the hose runs the whole interaction (grasp or push, periodic action,
@@ -25,22 +25,20 @@ Resets are included (the scene is built and cached before timing).  CPU time of 
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
-import platform
 import resource
 import statistics
 import sys
-from pathlib import Path
 
 import numpy as np
-from _machine import cpu_model, write_results  # noqa: E402  (benchmarks/ is on sys.path)
 
 import cablesim  # noqa: F401  (selects the headless GL back end)
+from benchmarks import RESULTS, write_results
+from cablesim import provenance as pv
 from cablesim.envs import HoseExploreConfig, HoseExploreEnv, aim_at_segment
 from cablesim.envs.box import fast_config, make_box_env
 
-RESULTS = Path(__file__).parent / "results" / "env.md"
+OUT = RESULTS / "env.md"
 
 
 def _cpu() -> float:
@@ -139,10 +137,10 @@ def main() -> int:
     if args.write:
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
         lines = [
-            "# Environment throughput (`benchmarks/bench_env.py`)",
+            "# Environment throughput (`python -m benchmarks.bench_env`)",
             "",
-            f"- date: {datetime.date.today().isoformat()}",
-            f"- machine: {cpu_model()}, {os.cpu_count()} cores, {platform.platform()}",
+            f"- date: {pv.utc_date()}; commit {pv.git_commit()}",
+            f"- machine: {pv.machine()}",
             f"- load average at the end: {load:.1f} (CPU time is reported, pinned to one core)",
             f"- episodes per case: {args.episodes} (seeds {seeds[0]}..{seeds[-1]})",
             "",
@@ -156,7 +154,7 @@ def main() -> int:
                 f"| {r['median_step_s']:.2f} | {r['max_step_s']:.2f} | {r['success']:.0%} "
                 f"| {r['mean_reward']:.3f} |"
             )
-        write_results(RESULTS, "\n".join(lines) + "\n")
+        write_results(OUT, "\n".join(lines) + "\n")
     return 0
 
 

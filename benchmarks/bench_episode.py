@@ -3,7 +3,7 @@
 target frame), ground truth (flow from the target frame to every kept frame) and the default
 CPU perception (``segment_stream(stream, method="correlation", flow="dis")``).
 
-    .venv/bin/python benchmarks/bench_episode.py [--seed 2] [--repeats 3] [--write]
+    .venv/bin/python -m benchmarks.bench_episode [--seed 2] [--repeats 3] [--write]
         [--json-out FILE] [--baseline FILE]
 
 Default settings: 640x480, 4 hoses, one grasp, two actions of 3 periods.  The scene is built
@@ -20,29 +20,26 @@ writes ``benchmarks/results/episode.md``.
 
 from __future__ import annotations
 
-import os
-import sys
+import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _interaction import (  # noqa: E402
+# isort: split
+import argparse
+import json
+import statistics
+import sys
+from pathlib import Path
+
+import cablesim  # noqa: F401  (selects the headless GL back end)
+from benchmarks import RESULTS, write_results
+from benchmarks._interaction import (
     pin_to_one_core,
     run_interaction,
     run_meta,
     single_thread_environment,
     uptime,
 )
-from _machine import write_results  # noqa: E402
 
-single_thread_environment()
-
-import argparse  # noqa: E402
-import json  # noqa: E402
-import statistics  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import cablesim  # noqa: E402, F401  (selects the headless GL back end)
-
-RESULTS = Path(__file__).parent / "results" / "episode.md"
+OUT = RESULTS / "episode.md"
 STAGES = (
     ("physics_control", "physics + control (stepping, IK, settling)"),
     ("rendering", "rendering (RGB+depth and label passes)"),
@@ -67,6 +64,7 @@ def main() -> int:
     ap.add_argument("--json-out", type=Path, help="save the runs as JSON")
     ap.add_argument("--baseline", type=Path, help="JSON of an earlier run for a before/after table")
     args = ap.parse_args()
+    single_thread_environment()  # before the first rendering (and the workers)
 
     core = None if args.no_pin else pin_to_one_core()
     load_start = uptime()
@@ -113,7 +111,7 @@ def main() -> int:
     text = report(meta, runs, args.baseline)
     print(text)
     if args.write:
-        write_results(RESULTS, text)
+        write_results(OUT, text)
     return 0
 
 
@@ -127,7 +125,7 @@ def report(meta: dict, runs: list[dict], baseline: Path | None) -> str:
         "time with the 1 mm rule, release, retreat, settle, target frame, ground-truth flow to "
         "every kept frame, then the default CPU perception "
         "(`segment_stream(stream, method='correlation', flow='dis')`: DIS preset fine, normal flow, arm masks and depth foreground where present; DIS medium and no refine before issue 10). "
-        "`benchmarks/bench_episode.py --write`.",
+        "`python -m benchmarks.bench_episode --write`.",
         "",
         f"- date: {meta['date']}; cablesim commit {meta['commit']}",
         f"- machine: {meta['machine']}; run pinned to core {meta['pinned_core']}",

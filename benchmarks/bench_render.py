@@ -1,6 +1,6 @@
 """Render cost of the arm's look: primitive geoms vs franka_ros meshes (``RobotConfig.visual``).
 
-    taskset -c 0 .venv/bin/python benchmarks/bench_render.py [--repeats 7]
+    taskset -c 0 .venv/bin/python -m benchmarks.bench_render [--repeats 7]
 
 Writes ``benchmarks/results/render.md``.  One core: the process (and the software rasteriser's
 threads, ``LP_NUM_THREADS=1``) is pinned to CPU 0; timings are CPU seconds
@@ -11,35 +11,27 @@ shows the shoulder at the image's right edge) and home (the arm in the middle of
 
 from __future__ import annotations
 
+import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
+
+# isort: split
+import argparse
 import os
+import statistics
+import subprocess
+import time
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_v, "1")
-os.environ.setdefault("LP_NUM_THREADS", "1")  # Mesa llvmpipe: one rasteriser thread
+import mujoco
+import numpy as np
 
-import argparse  # noqa: E402
-import datetime  # noqa: E402
-import platform  # noqa: E402
-import statistics  # noqa: E402
-import subprocess  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+from benchmarks import RESULTS, write_results
+from cablesim import provenance as pv
+from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses
+from cablesim.perception.frames import LABEL_ROBOT
+from cablesim.sim.camera import SimCamera
+from cablesim.sim.config import SceneConfig
+from cablesim.sim.world import World
 
-import cablesim.gl  # noqa: E402
-
-cablesim.gl.configure()  # the headless GL back end, before MuJoCo is imported
-
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
-
-from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses  # noqa: E402
-from cablesim.perception.frames import LABEL_ROBOT  # noqa: E402
-from cablesim.sim.camera import SimCamera  # noqa: E402
-from cablesim.sim.config import SceneConfig  # noqa: E402
-from cablesim.sim.world import World  # noqa: E402
-
-RESULTS = Path(__file__).parent / "results" / "render.md"
+OUT = RESULTS / "render.md"
 
 
 def cpu_per_call(fn, frames: int, repeats: int) -> float:
@@ -81,6 +73,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--frames", type=int, default=20, help="rendered frames per repeat")
     args = ap.parse_args()
+    os.environ.setdefault("LP_NUM_THREADS", "1")  # Mesa llvmpipe: one rasteriser thread
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     res = {}
@@ -111,13 +104,12 @@ def main() -> None:
                 fps(q[pose + "_snapshot"]),
             ),
         ]
-    now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     load = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
     lines = [
         "# Render cost of the arm's look (RobotConfig.visual)",
         "",
-        f"- date: {now}",
-        f"- machine: {platform.platform()}; CPU: {cpu_model()}; {os.cpu_count()} cores; "
+        f"- date: {pv.utc_date()}; commit {pv.git_commit()}",
+        f"- machine: {pv.machine()}; "
         f"pinned to one core, LP_NUM_THREADS={os.environ.get('LP_NUM_THREADS')}",
         f"- load while measuring: {load}",
         f"- mujoco {mujoco.__version__}, MUJOCO_GL={os.environ.get('MUJOCO_GL')}, "
@@ -130,10 +122,8 @@ def main() -> None:
         *[f"| {a} | {b} | {c} |" for a, b, c in rows],
         "",
     ]
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text("\n".join(lines))
     print("\n".join(lines))
-    print(f"[bench] wrote {RESULTS}")
+    write_results(OUT, "\n".join(lines))
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Simulation benchmarks: physics speed, rendering speed, ground-truth flow cost.
 
-    .venv/bin/python benchmarks/bench_sim.py [--repeats 5]
+    .venv/bin/python -m benchmarks.bench_sim [--repeats 5]
 
 Writes ``benchmarks/results/sim.md``.  Single-threaded (BLAS/OpenMP threads pinned to 1).
 Targets: physics >= 3x real time; RGB + depth + labels >= 15 fps at 640x480; GT flow
@@ -9,29 +9,26 @@ Targets: physics >= 3x real time; RGB + depth + labels >= 15 fps at 640x480; GT 
 
 from __future__ import annotations
 
+import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
+
+# isort: split
+import argparse
 import os
+import statistics
+import time
 
-for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_v, "1")
+import cv2
+import mujoco
+import numpy as np
 
-import argparse  # noqa: E402
-import datetime  # noqa: E402
-import platform  # noqa: E402
-import statistics  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
+from benchmarks import RESULTS, write_results
+from cablesim import provenance as pv
+from cablesim.sim.camera import SimCamera
+from cablesim.sim.config import SceneConfig
+from cablesim.sim.flow_gt import gt_flow
+from cablesim.sim.world import World
 
-import cv2  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
-
-from cablesim.sim.camera import SimCamera  # noqa: E402
-from cablesim.sim.config import SceneConfig  # noqa: E402
-from cablesim.sim.flow_gt import gt_flow  # noqa: E402
-from cablesim.sim.world import World  # noqa: E402
-
-RESULTS = Path(__file__).parent / "results" / "sim.md"
+OUT = RESULTS / "sim.md"
 
 
 def timed(fn, repeats: int) -> list[float]:
@@ -116,12 +113,11 @@ def main() -> None:
         ("labels only (render_labels) fps", f"{1 / med(lab_t):.1f}", ""),
         ("GT flow ms/frame", f"{1000 * med(flow_t):.1f}", "<= 20"),
     ]
-    now = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")
     lines = [
         "# Simulation benchmark",
         "",
-        f"- date: {now}",
-        f"- machine: {platform.platform()}; CPU: {cpu_model()}; {os.cpu_count()} cores "
+        f"- date: {pv.utc_date()}; commit {pv.git_commit()}",
+        f"- machine: {pv.machine()} "
         "(BLAS/OpenMP/OpenCV threads pinned to 1; MuJoCo single-threaded)",
         f"- mujoco {mujoco.__version__}, MUJOCO_GL={os.environ.get('MUJOCO_GL')}, "
         f"numpy {np.__version__}",
@@ -136,10 +132,8 @@ def main() -> None:
         *[f"| {a} | {b} | {c} |" for a, b, c in rows],
         "",
     ]
-    RESULTS.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS.write_text("\n".join(lines))
     print("\n".join(lines))
-    print(f"[bench] wrote {RESULTS}")
+    write_results(OUT, "\n".join(lines))
 
 
 if __name__ == "__main__":

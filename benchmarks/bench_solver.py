@@ -1,7 +1,7 @@
 """Where the physics time of one default interaction goes: steps, solver and iterations per
 phase, and what MuJoCo's constraint solver does in the states where Newton stalls.
 
-    .venv/bin/python benchmarks/bench_solver.py [--seed 2] [--timestep 0.004]
+    .venv/bin/python -m benchmarks.bench_solver [--seed 2] [--timestep 0.004]
         [--replay SEED:T ...] [--write]
 
 Part 1 runs one default interaction (no perception) and counts, per phase (approach and grasp,
@@ -20,28 +20,24 @@ The machine is shared: iteration counts are exact, times are indicative.
 
 from __future__ import annotations
 
-import os
-import sys
+import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _interaction import (  # noqa: E402
+# isort: split
+import argparse
+import sys
+import time
+
+import numpy as np
+
+import cablesim  # noqa: F401  (selects the headless GL back end; mujoco after it)
+from benchmarks import RESULTS, write_results
+from benchmarks._interaction import (
     run_meta,
     single_thread_environment,
     uptime,
 )
-from _machine import write_results  # noqa: E402
 
-single_thread_environment()
-
-import argparse  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-import cablesim  # noqa: E402, F401  (selects the headless GL back end; mujoco after it)
-
-RESULTS = Path(__file__).parent / "results" / "solver.md"
+OUT = RESULTS / "solver.md"
 PHASES = ("grasp_at", "periodic_action", "release", "retreat")
 SOLVER_NAMES = {0: "PGS", 1: "CG", 2: "Newton"}
 #: solver options tried on the stalled states: name -> {mjOption field: value}
@@ -279,7 +275,8 @@ def report(runs: list[dict], meta: dict) -> str:
     lines = [
         "# Solver benchmark: where the physics time of one interaction goes",
         "",
-        "`benchmarks/bench_solver.py --write`: one default interaction (no perception), physics "
+        "`python -m benchmarks.bench_solver --write`: one default interaction (no perception), "
+        "physics "
         "steps per phase and solver, then the states where Newton stalled during the actions "
         "re-solved with other solver options.",
         "",
@@ -335,6 +332,7 @@ def main() -> int:
     ap.add_argument("--replay-duration", type=float, default=0.3)
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args()
+    single_thread_environment()  # before the first rendering (and the workers)
     load_start = uptime()
     runs = [run(args.seed, dt) for dt in (args.timestep or [0.004])]
     replays = []
@@ -347,7 +345,7 @@ def main() -> int:
         text += "\n" + "\n".join(report_replays(replays))
     print(text)
     if args.write:
-        write_results(RESULTS, text)
+        write_results(OUT, text)
     return 0
 
 

@@ -2,7 +2,7 @@
 distinct seed (scene from the settle cache, start segment, interaction with ground truth, the
 default CPU perception), run in ``ProcessPoolExecutor`` workers started with ``spawn``.
 
-    .venv/bin/python benchmarks/bench_throughput.py [--seeds 2,6,8,10] [--workers 1,2] [--write]
+    .venv/bin/python -m benchmarks.bench_throughput [--seeds 2,6,8,10] [--workers 1,2] [--write]
 
 Every seed's scene is built once in this process before timing (so its settled state is in the
 cache); the timed part starts with the pool and ends with the last result, so it includes
@@ -15,29 +15,28 @@ other jobs' load (reported) takes cores away from the workers.
 
 from __future__ import annotations
 
-import os
-import sys
+import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _interaction import (  # noqa: E402
+# isort: split
+import argparse
+import json
+import multiprocessing
+import os
+import statistics
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from benchmarks import RESULTS, write_results
+from benchmarks._interaction import (
     run_interaction,
     run_meta,
     single_thread_environment,
     uptime,
 )
-from _machine import write_results  # noqa: E402
 
-single_thread_environment()
-
-import argparse  # noqa: E402
-import json  # noqa: E402
-import multiprocessing  # noqa: E402
-import statistics  # noqa: E402
-import time  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-RESULTS = Path(__file__).parent / "results" / "throughput.md"
+OUT = RESULTS / "throughput.md"
 
 
 def episode(seed: int) -> dict:
@@ -86,6 +85,7 @@ def main() -> int:
     ap.add_argument("--write", action="store_true", help="write benchmarks/results/throughput.md")
     ap.add_argument("--json-out", type=Path)
     args = ap.parse_args()
+    single_thread_environment()  # before the first rendering (and the workers)
     seeds = [int(s) for s in args.seeds.split(",")]
     if len(set(seeds)) != len(seeds):
         print("seeds must be distinct")
@@ -126,7 +126,7 @@ def main() -> int:
     text = report(meta, rows)
     print(text)
     if args.write:
-        write_results(RESULTS, text)
+        write_results(OUT, text)
     return 0 if same else 1
 
 
@@ -139,7 +139,7 @@ def report(meta: dict, rows: list[dict]) -> str:
         "distinct seed per episode: scene from the settle cache, start segment, the default "
         "interaction with ground truth, the default CPU perception (DIS fine + refine + correlation).  "
         "The wall clock runs from starting the pool to the last result (worker start-up "
-        "included).  `benchmarks/bench_throughput.py --write`.",
+        "included).  `python -m benchmarks.bench_throughput --write`.",
         "",
         f"- date: {meta['date']}; cablesim commit {meta['commit']}",
         f"- machine: {meta['machine']}",

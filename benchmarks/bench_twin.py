@@ -2,7 +2,7 @@
 live RealSense software device, StreamClock, run_interaction, DIS + motion correlation, grasp
 sampler) and the same seeds simulated, with the same perception.
 
-    .venv/bin/python benchmarks/bench_twin.py [--seeds 0 1 2] [--write]
+    .venv/bin/python -m benchmarks.bench_twin [--seeds 0 1 2] [--write]
 
 Per seed: the interaction's outcome, frames kept per action, the follow gain in the twin, the
 frame/pose skew of the StreamClock, the twin's lag and tracking, F_0.4 (votes >= 1 against the
@@ -17,24 +17,21 @@ the server share the CPU with everything else.  ``--write`` writes
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import sys
 import time
-from pathlib import Path
-
-from _machine import cpu_model, write_results  # noqa: E402  (benchmarks/ is on sys.path)
 
 import cablesim  # noqa: F401  (selects the headless GL back end)
+from benchmarks import RESULTS, write_results
+from cablesim import provenance as pv
 from cablesim.episode.config import ActionConfig, InteractionConfig
 from cablesim.progress import Progress
 from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
 from cablesim.twin import FrankaSimServer
 from cablesim.twin.episode import sim_episode, twin_episode
 
-RESULTS = Path(__file__).parent / "results" / "twin.md"
+OUT = RESULTS / "twin.md"
 
 
 def config(seed: int) -> EpisodeConfig:
@@ -105,11 +102,10 @@ def main() -> int:
         "RGB-D frames through a live librealsense software device into RealSenseCamera, "
         "StreamClock, run_interaction, DIS + motion correlation, the grasp sampler; and the "
         "same seeds in pure simulation (`simulate_episode`) with the same perception.  "
-        "3 hoses, 320x240, one period per action.  `benchmarks/bench_twin.py --write`.",
+        "3 hoses, 320x240, one period per action.  `python -m benchmarks.bench_twin --write`.",
         "",
-        f"- date: {datetime.datetime.now().isoformat(timespec='seconds')}",
-        f"- machine: {platform.platform()}, {cpu_model()}, {os.cpu_count()} cores, shared "
-        "(load average per seed in the table: before-after)",
+        f"- date: {pv.utc_date()}; commit {pv.git_commit()}",
+        f"- machine: {pv.machine()}, shared (load average per seed in the table: before-after)",
         f"- python {sys.version.split()[0]}, MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}",
         "",
         "| seed | hose | twin interaction | frames kept | follow gain (twin) | skew median / "
@@ -132,7 +128,7 @@ def main() -> int:
     text = "\n".join(lines)
     print("\n".join(lines[: 12 + len(rows)]))
     if args.write:
-        write_results(RESULTS, text)
+        write_results(OUT, text)
     return 0
 
 

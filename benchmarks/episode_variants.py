@@ -4,7 +4,7 @@ the follow gains and the default correlation's scores against the ground truth b
 CPU time.  This is the basis for the protocol decision the 12 s target of issue 9 needs
 (``benchmarks/results/episode.md``: the default costs ~22 s on this machine).
 
-    .venv/bin/python benchmarks/episode_variants.py [--seeds 2 8] [--write]
+    .venv/bin/python -m benchmarks.episode_variants [--seeds 2 8] [--write]
         [--variant NAME FIELD=VALUE ...]
 
 Each variant is a list of ``--set`` assignments on the episode config (``cablesim explore
@@ -16,30 +16,27 @@ benchmark of the method (``realistic_flow.py`` and ``cablesim benchmark thesis``
 
 from __future__ import annotations
 
-import os
-import sys
+import benchmarks._env  # noqa: F401  (one thread, headless GL: before numpy and MuJoCo)
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _interaction import (  # noqa: E402
-    episode_config,
+# isort: split
+import argparse
+import json
+import statistics
+import sys
+from pathlib import Path
+
+import cablesim  # noqa: F401  (selects the headless GL back end)
+from benchmarks import RESULTS, write_results
+from benchmarks._interaction import (
     pin_to_one_core,
     run_interaction,
     run_meta,
     single_thread_environment,
     uptime,
 )
-from _machine import write_results  # noqa: E402
+from cablesim.sweep import episode_config
 
-single_thread_environment()
-
-import argparse  # noqa: E402
-import json  # noqa: E402
-import statistics  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import cablesim  # noqa: E402, F401  (selects the headless GL back end)
-
-RESULTS = Path(__file__).parent / "results" / "episode_variants.md"
+OUT = RESULTS / "episode_variants.md"
 STAGES = ("physics_control", "rendering", "ground_truth", "perception", "total")
 
 #: name -> assignments on the episode config
@@ -109,10 +106,11 @@ def main() -> int:
         help="run only this variant (repeatable); a name from the built-in list, or a new "
         "name followed by its assignments",
     )
-    ap.add_argument("--write", action="store_true", help=f"write {RESULTS}")
+    ap.add_argument("--write", action="store_true", help=f"write {OUT}")
     ap.add_argument("--json-out", type=Path, help="save the rows as JSON")
     ap.add_argument("--no-pin", action="store_true", help="do not pin to one CPU core")
     args = ap.parse_args()
+    single_thread_environment()  # before the first rendering (and the workers)
 
     variants: dict[str, tuple[str, ...]] = {}
     for name, *assignments in args.variant or [[n] for n in VARIANTS]:
@@ -151,7 +149,7 @@ def main() -> int:
     text = report(meta, rows, variants)
     print(text)
     if args.write:
-        write_results(RESULTS, text)
+        write_results(OUT, text)
     return 0
 
 
@@ -167,7 +165,7 @@ def report(meta: dict, rows: list[dict], variants: dict[str, tuple[str, ...]]) -
         "ground truth, the default CPU perception) for config variants, one interaction per "
         "(variant, seed), pinned to one core.  Scores: the default correlation's union and "
         "intersection masks against the grasped hose in the target frame (one interaction per "
-        "seed: indicative only).  `benchmarks/episode_variants.py --write`.",
+        "seed: indicative only).  `python -m benchmarks.episode_variants --write`.",
         "",
         f"- date: {meta['date']}; cablesim commit {meta['commit']}",
         f"- machine: {meta['machine']}; run pinned to core {meta['pinned_core']}",

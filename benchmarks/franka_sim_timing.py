@@ -1,8 +1,8 @@
 """Why the robot tests against franka-sim see reflexes on this machine: the host's timing.
 
-    .venv/bin/python benchmarks/franka_sim_timing.py [--rounds 6] [--load] [--write]
-    .venv/bin/python benchmarks/franka_sim_timing.py --server switch-interval   # a remedy
-    .venv/bin/python benchmarks/franka_sim_timing.py --client libfranka         # the old client
+    .venv/bin/python -m benchmarks.franka_sim_timing [--rounds 6] [--load] [--write]
+    .venv/bin/python -m benchmarks.franka_sim_timing --server switch-interval   # a remedy
+    .venv/bin/python -m benchmarks.franka_sim_timing --client libfranka         # the old client
 
 Two measurements, in one run:
 
@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import datetime
 import os
-import platform
 import subprocess
 import sys
 import tempfile
@@ -44,8 +43,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _machine import cpu_model, git_commit  # noqa: E402  (benchmarks/ is on sys.path)
 
+from benchmarks import RESULTS
+from cablesim import provenance as pv
 from cablesim.panda import HOME_QPOS
 from cablesim.robot.franky_panda import FrankyPanda
 from cablesim.twin.franka_sim import (
@@ -56,7 +56,7 @@ from cablesim.twin.franka_sim import (
     Stalls,
 )
 
-RESULTS = Path(__file__).parent / "results" / "franka_sim_timing.md"
+OUT = RESULTS / "franka_sim_timing.md"
 SERVER_PRELUDES = {
     "default": "",
     "switch-interval": "import sys\nsys.setswitchinterval(0.0002)\n",
@@ -215,8 +215,7 @@ def report(args: argparse.Namespace, wake: dict[str, object], run: dict[str, obj
         f"{', 2 busy processes beside it' if args.load else ''}"
         f"{f', the {args.stall} stalled 2-12 ms every 50-250 ms' if args.stall != 'none' else ''}",
         "",
-        f"{cpu_model()}, {os.cpu_count()} CPUs, {platform.system()} {platform.release()}, "
-        f"commit {git_commit()}, `{' '.join(sys.argv[1:]) or '(defaults)'}`",
+        f"{pv.machine()}, commit {pv.git_commit()}, `{' '.join(sys.argv[1:]) or '(defaults)'}`",
         "",
         "| wake-up lateness of a 1 ms sleep (us) | median | p99 | p99.9 | max | > 0.5 ms |",
         "|---|---|---|---|---|---|",
@@ -285,16 +284,16 @@ def main() -> None:
     if args.write:
         head = (
             ""
-            if RESULTS.exists()
+            if OUT.exists()
             else "# franka-sim and this host's timing\n\n"
             + (
-                "Written by `benchmarks/franka_sim_timing.py` (its docstring says what is "
+                "Written by `python -m benchmarks.franka_sim_timing` (its docstring says what is "
                 "measured).\n\n"
             )
         )
-        with open(RESULTS, "a") as f:
+        with open(OUT, "a") as f:
             f.write(head + text + "\n")
-        print(f"appended to {RESULTS}")
+        print(f"appended to {OUT}")
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 resident memory (RSS), the open file descriptors and the time per episode tracked, to show that
 nothing accumulates (leaked renderers, files, arrays) over a long training-like run.
 
-    nice .venv/bin/python benchmarks/soak_env.py [--episodes 100] [--budget 2] [--write]
+    nice .venv/bin/python -m benchmarks.soak_env [--episodes 100] [--budget 2] [--write]
 
 One environment (160x120, 2 hoses, one period per action) is made once; every episode resets
 it with its own seed (the scene is built once and reused, as in training) and spends its budget
@@ -13,10 +13,8 @@ writes ``benchmarks/results/soak.md``.
 from __future__ import annotations
 
 import argparse
-import datetime
 import math
 import os
-import platform
 import resource
 import statistics
 import sys
@@ -24,12 +22,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from _machine import cpu_model, write_results  # noqa: E402  (benchmarks/ is on sys.path)
 
 import cablesim  # noqa: F401  (selects the headless GL back end)
+from benchmarks import RESULTS, write_results
+from cablesim import provenance as pv
 from cablesim.envs import HoseExploreConfig, HoseExploreEnv
 
-RESULTS = Path(__file__).parent / "results" / "soak.md"
+OUT = RESULTS / "soak.md"
 
 
 def rss_mb() -> float:
@@ -88,8 +87,8 @@ def main() -> int:
         budget=args.budget,
         periods=1,
     )
-    started = datetime.datetime.now(datetime.UTC)
-    load_start = os.getloadavg()
+    started = pv.utc_date()
+    load_start = pv.load_average()
     t0, c0 = time.perf_counter(), time.process_time()
     rss0, fds0 = rss_mb(), open_files()
     env = HoseExploreEnv(cfg)
@@ -136,17 +135,17 @@ def main() -> int:
     lines = [
         "# Soak: the Gymnasium environment over many episodes",
         "",
-        f"`benchmarks/soak_env.py --episodes {args.episodes} --budget {args.budget}` (run with "
+        f"`python -m benchmarks.soak_env --episodes {args.episodes} --budget {args.budget}` "
+        "(run with "
         "`nice`): one `HoseExploreEnv` "
         f"({args.width}x{args.height}, 2 hoses, one period per action, scene seed "
         f"{args.scene_seed}); episode k is `reset(seed=k)` and {args.budget} interaction(s) aimed "
         "at the start segment (a grasp, then a push).  Memory is the resident set size (VmRSS) "
         "after each episode; open files are the entries of /proc/self/fd.",
         "",
-        f"- date: {started.isoformat(timespec='seconds')}",
-        f"- machine: {platform.platform()}, {cpu_model()}, {os.cpu_count()} cores, shared; load "
-        f"average at start {', '.join(f'{x:.2f}' for x in load_start)}, at the end "
-        f"{', '.join(f'{x:.2f}' for x in os.getloadavg())}",
+        f"- date: {started}; commit {pv.git_commit()}",
+        f"- machine: {pv.machine()}, shared; load average at start {load_start}, at the end "
+        f"{pv.load_average()}",
         f"- python {sys.version.split()[0]}, MUJOCO_GL={os.environ.get('MUJOCO_GL', '')}",
         f"- {args.episodes} episodes, {len(rows) * args.budget} interactions "
         f"({n_steps} successful); total {total_wall / 60:.1f} min wall, {total_cpu / 60:.1f} min "
@@ -170,7 +169,7 @@ def main() -> int:
     text = "\n".join(lines)
     print(text)
     if args.write:
-        write_results(RESULTS, text)
+        write_results(OUT, text)
     return 0
 
 

@@ -60,9 +60,9 @@ from cablesim.jsonutil import json_default
 
 #: kind -> "module:function" of the runner (imported in the worker)
 RUNNERS: dict[str, str] = {
-    "thesis.interaction": "cablesim.benchmark.scene:run_interaction",
-    "thesis.explore": "cablesim.benchmark.scene:run_exploration",
-    "thesis.clip": "cablesim.benchmark.scene:run_clip",
+    "thesis.interaction": "cablesim.thesis.scene:run_interaction",
+    "thesis.explore": "cablesim.thesis.scene:run_exploration",
+    "thesis.clip": "cablesim.thesis.scene:run_clip",
     "dataset.movingcables": "cablesim.dataset.generate:run_movingcables",
     "dataset.mcor": "cablesim.dataset.generate:run_mcor",
     "test.echo": "cablesim.jobs:echo",

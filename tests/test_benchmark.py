@@ -6,15 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cablesim.benchmark import explore_thresholds
-from cablesim.benchmark import report as rp
-from cablesim.benchmark.config import SceneSize, ThesisConfig
 from cablesim.cli import main
 from cablesim.errors import ConfigError
 from cablesim.perception.metrics import mean_scores, score_mask
 from cablesim.perception.pipeline import compute_statistics, segment_from_statistics
 from cablesim.perception.synthetic import Region, SyntheticSpec, synthetic_stream
 from cablesim.perception.tuning import threshold_counts, tune_thresholds
+from cablesim.thesis import explore_thresholds
+from cablesim.thesis import report as rp
+from cablesim.thesis.config import SceneSize, ThesisConfig
 
 
 def test_config_refuses_overlapping_splits_and_unknown_settings():

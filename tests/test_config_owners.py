@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cablesim.benchmark.config import SceneSize, ThesisConfig
 from cablesim.cli import main
 from cablesim.config import ConfigMigrationWarning, flatten, replace_paths
 from cablesim.dataset.randomize import Randomization
@@ -31,6 +30,7 @@ from cablesim.sim.config import (
     PerturbConfig,
     SceneConfig,
 )
+from cablesim.thesis.config import SceneSize, ThesisConfig
 
 DATA = Path(__file__).parent / "data" / "old_configs"
 #: what the runs of the old config files gave before the change (see DATA / "README.md")

@@ -89,7 +89,7 @@ def test_api_reference_documents_the_public_packages(site: Path) -> None:
     assert 'id="cablesim.episode.InteractionConfig"' in episode
     assert 'id="cablesim.episode.config.InteractionConfig"' not in episode
     assert 'id="cablesim.sim.world.World"' in _page(site, "api/sim")
-    assert 'id="cablesim.dataset.randomize"' in _page(site, "api/benchmark")  # no __init__.py
+    assert 'id="cablesim.dataset.randomize"' in _page(site, "api/thesis")  # no __init__.py
     # Sphinx roles are shown as code, not as ":class:"
     for page in site.joinpath("api").rglob("*.html"):
         assert ":class:<code>" not in page.read_text(encoding="utf-8"), page

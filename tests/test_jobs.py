@@ -79,8 +79,8 @@ def test_ray_gives_the_local_result_files(tmp_path):
     """Two tiny scene jobs of the thesis benchmark through a local Ray instance
     (``ray.init(num_cpus=2)``) write the files the in-process executor writes."""
     pytest.importorskip("ray")
-    from cablesim.benchmark import ThesisConfig
-    from cablesim.benchmark.config import SceneSize
+    from cablesim.thesis import ThesisConfig
+    from cablesim.thesis.config import SceneSize
 
     cfg = ThesisConfig(
         validation=(11, 12),

@@ -1,9 +1,9 @@
 """Runs that are interrupted or collide lose nothing (issue 19).
 
-- ``cablesim dataset``, ``cablesim benchmark thesis`` and ``benchmarks/seeds.py`` killed with
+- ``cablesim dataset``, ``cablesim benchmark thesis`` and ``python -m benchmarks.seeds`` killed with
   SIGKILL mid-run (one job finished, another in progress) and started again write the same
   files, byte for byte, as a run that never stopped (what times the run aside: ``timings.jsonl``,
-  the date and run lines of ``report.md``, ``seeds.VOLATILE``).  The seed sweep runs a stand-in
+  the date and run lines of ``report.md``, ``cablesim.sweep.VOLATILE``).  The seed sweep runs a stand-in
   for its per-seed episode (a real seed takes 15-40 s here); its resume logic is the real one.
 - A second command into an ``--out`` another process holds is refused at once with the
   project's error naming the lock file and the holder; the holder finishes unharmed; a stale
@@ -16,7 +16,6 @@
 from __future__ import annotations
 
 import errno
-import importlib.util
 import json
 import os
 import signal
@@ -29,11 +28,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from benchmarks import seeds
+from cablesim import sweep
 from cablesim.errors import DiskFullError, OutputBusyError
 from cablesim.files import OutputLock
 from cablesim.jobs import Job, execute, read_result
 
-BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+ROOT = Path(__file__).resolve().parents[1]
 TINY = ["--width", "160", "--height", "120", "--periods", "1", "--workers", "1", "--quiet"]
 DATASET = ["dataset", "movingcables", "--scenes", "402:404", *TINY]  # 2 clips, about 15 s
 CLIP_1 = "movingcables-test-0001-s000402"
@@ -98,13 +99,13 @@ def _timings_lines_are_whole(path: Path) -> None:
         json.loads(line)
 
 
-def _refused_while_held(holder: subprocess.Popen, args: list[str], lock: Path) -> str:
+def _refused_while_held(holder: subprocess.Popen, args: list[str], lock: Path, **kw: object) -> str:
     """Run ``args`` while ``holder`` (stopped meanwhile, so it cannot finish first) holds
     ``lock``; the refusal's stderr."""
     _wait_for(lambda: f"pid {holder.pid}:" in lock.read_text(), holder, "the lock taken")
     holder.send_signal(signal.SIGSTOP)
     try:
-        r = subprocess.run(args, capture_output=True, text=True, timeout=300)
+        r = subprocess.run(args, capture_output=True, text=True, timeout=300, **kw)
     finally:
         holder.send_signal(signal.SIGCONT)
     assert r.returncode == 2, r.stdout + r.stderr
@@ -179,8 +180,8 @@ def test_killed_thesis_benchmark_resumes_to_the_same_files(tmp_path):
 # --------------------------------------------------------------------------- the seed sweep
 FAKE_SEEDS = """
 import os, sys, time
-sys.path.insert(0, sys.argv[1])
-import seeds
+import cablesim.sweep
+from benchmarks import seeds
 
 def fake(seed, cache_dir=None, config=None):
     if os.environ.get("HOLD_SEED") == str(seed):
@@ -189,8 +190,8 @@ def fake(seed, cache_dir=None, config=None):
             "reason": "", "hose": seed % 3, "grasp_retries": 0, "resamples": 0,
             "wall_s": time.time() % 7, "cpu_s": time.process_time()}
 
-seeds.run_seed = fake
-sys.exit(seeds.main(sys.argv[2:]))
+cablesim.sweep.run_seed = fake
+sys.exit(seeds.main(sys.argv[1:]))
 """
 
 
@@ -199,7 +200,6 @@ def _seeds_cmd(out: Path) -> list[str]:
         sys.executable,
         "-c",
         FAKE_SEEDS,
-        str(BENCHMARKS),
         "--seeds",
         "1",
         "2",
@@ -213,21 +213,9 @@ def _seeds_cmd(out: Path) -> list[str]:
     ]
 
 
-def _seeds_module():
-    sys.path.insert(0, str(BENCHMARKS))
-    try:
-        spec = importlib.util.spec_from_file_location("seeds_resume", BENCHMARKS / "seeds.py")
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        return mod
-    finally:
-        sys.path.remove(str(BENCHMARKS))
-
-
 def test_killed_seed_sweep_resumes_with_the_rows_it_had(tmp_path):
-    seeds = _seeds_module()
     out = tmp_path / "sweep"
-    subprocess.run(_seeds_cmd(out), check=True, capture_output=True)
+    subprocess.run(_seeds_cmd(out), check=True, capture_output=True, cwd=ROOT)
     reference = json.loads((out / "seeds.json").read_text())
     out.rename(tmp_path / "reference")
 
@@ -237,21 +225,21 @@ def test_killed_seed_sweep_resumes_with_the_rows_it_had(tmp_path):
         except (OSError, ValueError):
             return []
 
-    killed = _start(_seeds_cmd(out), env={**os.environ, "HOLD_SEED": "2"})
+    killed = _start(_seeds_cmd(out), env={**os.environ, "HOLD_SEED": "2"}, cwd=ROOT)
     _wait_for(lambda: rows() == [1], killed, "seed 1's row")
-    err = _refused_while_held(killed, _seeds_cmd(out), out / ".seeds.json.lock")
+    err = _refused_while_held(killed, _seeds_cmd(out), out / ".seeds.json.lock", cwd=ROOT)
     assert f"pid {killed.pid}:" in err and str(out / ".seeds.json.lock") in err
     _kill(killed)
     first = json.loads((out / "seeds.json").read_text())["rows"][0]
 
-    resumed = subprocess.run(_seeds_cmd(out), capture_output=True, text=True, check=True)
+    resumed = subprocess.run(_seeds_cmd(out), capture_output=True, text=True, check=True, cwd=ROOT)
     assert "resuming: 1 of 3 seeds" in resumed.stdout
     doc = json.loads((out / "seeds.json").read_text())
     assert doc["rows"][0] == first  # seed 1 kept, not run again
-    assert seeds.comparable(doc) == seeds.comparable(reference)
-    assert seeds.comparable(doc)["summary"]["successes"] == 2
+    assert sweep.comparable(doc) == sweep.comparable(reference)
+    assert sweep.comparable(doc)["summary"]["successes"] == 2
     assert "| 3 | yes |" in (out / "seeds.md").read_text()
-    fresh = subprocess.run([*_seeds_cmd(out), "--fresh"], capture_output=True, text=True)
+    fresh = subprocess.run([*_seeds_cmd(out), "--fresh"], capture_output=True, text=True, cwd=ROOT)
     assert fresh.returncode == 0 and "resuming" not in fresh.stdout
 
 
@@ -282,14 +270,15 @@ def held(tmp_path) -> Iterator[Callable[[Path, str], subprocess.Popen]]:
 
 
 @pytest.mark.parametrize("command", ["dataset", "benchmark", "seeds"])
-def test_a_held_out_folder_is_refused_before_any_work(tmp_path, held, capsys, command):
+def test_a_held_out_folder_is_refused_before_any_work(tmp_path, held, capsys, monkeypatch, command):
     from cablesim.cli import main
 
     out = tmp_path / "out"
     if command == "seeds":
         holder = held(out, ".seeds.json.lock")
-        seeds = _seeds_module()
-        seeds.run_seed = lambda s, *a: {"seed": s, "outcome": "ok", "wall_s": 0, "cpu_s": 0}
+        monkeypatch.setattr(
+            sweep, "run_seed", lambda s, *a: {"seed": s, "outcome": "ok", "wall_s": 0, "cpu_s": 0}
+        )
         rc = seeds.main(["--seeds", "1", "--workers", "0", "--json", str(out / "other.json")])
         assert rc == 0 and (out / "other.json").exists()  # another results file: not held
         rc = seeds.main(["--seeds", "1", "--json", str(out / "seeds.json")])

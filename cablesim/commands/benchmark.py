@@ -86,8 +86,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def config_from_args(args: argparse.Namespace):
     """``ThesisConfig()`` or ``--config FILE``, then the flags given, then ``--set``."""
-    from cablesim.benchmark import ThesisConfig
     from cablesim.jobs import parse_range
+    from cablesim.thesis import ThesisConfig
 
     values: dict[str, object] = {}
     for name in ("validation", "test", "clip_validation", "clip_test"):
@@ -112,7 +112,7 @@ def config_from_args(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from cablesim.benchmark import run_thesis
+    from cablesim.thesis import run_thesis
 
     cfg = config_from_args(args)
     if args.show_config:

@@ -40,7 +40,7 @@ DIS_PRESETS = {
 #: ``fine``: OpenCV's medium preset with 8 px patches every 4 px at half resolution (medium's
 #: are 12 px every 8 px): patches of 16 full-resolution pixels instead of 24, so a 6-7 px
 #: hose drags its motion less far onto the board beside it, at about medium's cost
-#: (``benchmarks/realistic_flow.py``).
+#: (``benchmarks/experiments/realistic_flow/``).
 DIS_FINE = {"finest_scale": 1, "patch_size": 8, "patch_stride": 4}
 
 

@@ -3,7 +3,7 @@
 Block-based flow (DIS) matches patches wider than a 6-7 px hose, so a moving hose drags its
 motion onto the still board beside it and onto hoses it crosses; the dragged motion follows
 the gripper and passes motion correlation (SPEC section 9).  This module holds the remedies,
-each optional and measured on its own (``benchmarks/realistic_flow.py``):
+each optional and measured on its own (``benchmarks/experiments/realistic_flow/``):
 
 Per sample (a kept frame k; its flow phi to the target in target pixels p) -- a rejected pixel
 gets no sample in that frame (its flow becomes NaN, which the accumulators skip):
@@ -173,7 +173,7 @@ class RefineParams:
 #: no remedy at all (the flow as the back end gives it)
 RAW = RefineParams(arm_masks=False)
 #: what perception uses unless told otherwise (chosen on the validation scenes of
-#: ``benchmarks/realistic_flow.py``): the normal flow (structure tensor over 1.5 px), arm masks
+#: ``benchmarks/experiments/realistic_flow/``): the normal flow (structure tensor over 1.5 px), arm masks
 #: where the frames have them, and the depth foreground with its edges moved to the image's
 #: colour edges within 3 px; it abstains where the target has no usable depth
 DEFAULT_REFINE = RefineParams(normal_flow=1.5, foreground=ForegroundParams(colour_px=3))

@@ -5,7 +5,7 @@ with ``depth_model = "stereo"``); :class:`~cablesim.sim.camera.SimCamera` applie
 every image it returns, each drawn from its own named random stream of the scene's seed
 (``rgb_noise``, ``depth_noise``: :mod:`cablesim.seeding`), so the same seed gives the same
 noise.  They are plain functions of a clean image and a generator, so a clean recording can
-be given the same noise later (``benchmarks/realistic_flow.py`` does, to report noisy and
+be given the same noise later (``benchmarks/experiments/realistic_flow/`` does, to report noisy and
 noise-free results on the very same interactions).
 
 **RGB** (:func:`rgb_sensor`, :class:`~cablesim.sim.config.RGBSensorConfig`).  The rendered

@@ -36,7 +36,7 @@ least one other hose in the image.  It gets there deterministically:
    reason is raised as a named :class:`~cablesim.errors.SceneError`
    (``scene_unsettled`` or ``no_graspable_segment``, its ``outcome``), with every draw's
    reason in its message; runs record it as an outcome instead of stopping
-   (:func:`simulate_episode`, ``explore``, ``benchmarks/seeds.py``).
+   (:func:`simulate_episode`, ``explore``, :mod:`cablesim.sweep`).
 
 ``session.draws`` is the number of draws built (1 when the seed's own scene served),
 ``session.resamples`` says why each earlier draw was turned down, and ``session.cfg`` carries

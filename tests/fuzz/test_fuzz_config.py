@@ -12,7 +12,6 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from cablesim.benchmark.config import ThesisConfig
 from cablesim.config import from_dict, to_dict
 from cablesim.dataset.randomize import Randomization
 from cablesim.envs.hose_explore import HoseExploreConfig
@@ -22,6 +21,7 @@ from cablesim.policies.config import ExploreConfig
 from cablesim.sim.config import EpisodeConfig, PerturbConfig, SceneConfig
 from cablesim.sim.layout import sample_camera, sample_hoses, start_shape
 from cablesim.sim.world import World, _scene_xml, look_at_frame
+from cablesim.thesis.config import ThesisConfig
 
 from ._fuzz import HOSTILE, fuzz, own_error_or_result
 

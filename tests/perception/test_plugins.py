@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cablesim.benchmark.config import ThesisConfig
 from cablesim.cli import main
 from cablesim.errors import ConfigError, InputError
 from cablesim.perception import (
@@ -41,6 +40,7 @@ from cablesim.perception.synthetic import Region, SyntheticSpec, synthetic_strea
 from cablesim.perception.tuning import threshold_counts, tune_thresholds
 from cablesim.policies import ExploreConfig
 from cablesim.recording import write_stream
+from cablesim.thesis.config import ThesisConfig
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "plugins.md"
 FLOW = "my_flow:CoarseFarneback"  # the page's worked examples

@@ -43,7 +43,7 @@ def _stream(flows: np.ndarray, grip: np.ndarray, codes: np.ndarray, focal: float
 
 @pytest.mark.parametrize("case", ["plain", "blocks"])
 def test_matches_the_published_code(case):
-    """Maps of the published code (benchmarks/published_reference.py) are reproduced: R^2,
+    """Maps of the published code (benchmarks/experiments/published_reference.py) are reproduced: R^2,
     |c0| and std to rounding, their stored uint8 maps and the vote shares exactly."""
     ref = np.load(REFERENCE)
     flows, grip, codes = ref["flows"], ref["gripper"], ref[f"{case}_codes"]

@@ -5,13 +5,13 @@ neighbouring points, with or without ground truth, and the retries are counted."
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from benchmarks import seeds as seeds_command
+from cablesim import sweep
 from cablesim.episode.config import InteractionConfig
 from cablesim.errors import (
     NoGraspableSegmentError,
@@ -31,8 +31,6 @@ from cablesim.sim.config import (
 )
 from cablesim.sim.layout import crossed_by, crossing_pairs
 from cablesim.sim.session import SimSession, simulate_episode
-
-BENCHMARKS = Path(__file__).resolve().parents[2] / "benchmarks"
 
 
 def small(seed: int, hoses: int = 2, **changes) -> EpisodeConfig:
@@ -60,21 +58,6 @@ def _cache(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("CABLESIM_CACHE", str(tmp_path_factory.getbasetemp() / "robust_cache"))
 
 
-@pytest.fixture(scope="module")
-def seeds_bench():
-    """``benchmarks/seeds.py`` as a module (its per-seed runner)."""
-    import sys
-
-    sys.path.insert(0, str(BENCHMARKS))
-    try:
-        spec = importlib.util.spec_from_file_location("seeds_bench", BENCHMARKS / "seeds.py")
-        mod = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(mod)
-        yield mod
-    finally:
-        sys.path.remove(str(BENCHMARKS))
-
-
 # ---------------------------------------------------------------------- named outcomes
 def test_scene_that_will_not_settle_is_a_named_outcome() -> None:
     ep = simulate_episode(unsettled())
@@ -99,13 +82,14 @@ def test_hose_without_graspable_segment_is_a_named_outcome() -> None:
     assert len(ep.draws["turned_down"]) == 2
 
 
-def test_the_seed_run_records_every_failure_and_goes_on(seeds_bench) -> None:
-    """The seeds benchmark's runner: each failure is a row with its named outcome, including
-    an error nothing anticipated; nothing is raised, so a run over many seeds continues."""
+def test_the_seed_run_records_every_failure_and_goes_on() -> None:
+    """The seed sweep's runner (:mod:`cablesim.sweep`): each failure is a row with its named
+    outcome, including an error nothing anticipated; nothing is raised, so a run over many
+    seeds continues."""
     rows = [
-        seeds_bench.run_seed(3, config=unsettled().to_dict()),
-        seeds_bench.run_seed(4, config=ungraspable().to_dict()),
-        seeds_bench.run_seed(5, config={**small(5).to_dict(), "hose": 7}),  # an invalid hose
+        sweep.run_seed(3, config=unsettled().to_dict()),
+        sweep.run_seed(4, config=ungraspable().to_dict()),
+        sweep.run_seed(5, config={**small(5).to_dict(), "hose": 7}),  # an invalid hose
     ]
     assert [r["outcome"] for r in rows] == [
         "scene_unsettled",
@@ -114,19 +98,19 @@ def test_the_seed_run_records_every_failure_and_goes_on(seeds_bench) -> None:
     ]
     assert not any(r["success"] for r in rows)
     assert all(r["cpu_s"] >= 0 and r["reason"] for r in rows)
-    md = seeds_bench.markdown(rows, _meta())
+    md = sweep.markdown(rows, _meta())
     assert "0 of 3 gave a successful interaction" in md and "scene_unsettled 1" in md
 
 
-def test_the_seed_run_refuses_a_bad_config_change_before_any_seed(seeds_bench, capsys) -> None:
+def test_the_seed_run_refuses_a_bad_config_change_before_any_seed(capsys) -> None:
     """``--set`` names the bad field and the run stops before a worker starts (no rows)."""
     with pytest.raises(SystemExit) as e:
-        seeds_bench.main(["--seeds", "1", "--set", "interaction.actions.perods=2"])
+        seeds_command.main(["--seeds", "1", "--set", "interaction.actions.perods=2"])
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert "interaction.actions.perods" in err and "periods" in err
     with pytest.raises(SystemExit):
-        seeds_bench.main(["--seeds", "1", "--set", "interaction.actions.periods=0"])
+        seeds_command.main(["--seeds", "1", "--set", "interaction.actions.periods=0"])
     assert "periods" in capsys.readouterr().err
 
 

@@ -1,7 +1,8 @@
 """Realistic flow: motion correlation with the CPU flow on recorded, noisy, perturbed scenes.
 
-    nice -n 10 .venv/bin/python benchmarks/realistic_flow.py record      # simulate (resumable)
-    nice -n 10 .venv/bin/python benchmarks/realistic_flow.py evaluate    # perception + tables
+    # simulate (resumable), then perception and tables
+    nice -n 10 .venv/bin/python -m benchmarks.experiments.realistic_flow record
+    nice -n 10 .venv/bin/python -m benchmarks.experiments.realistic_flow evaluate
 
 ``record`` simulates one grasp interaction per scene (perturbed neighbours, arm masks, ground
 truth; validation seeds from 300, test seeds from 700, the first scenes whose interaction
@@ -11,27 +12,24 @@ variants on the recorded streams (flow once per stream and back end, cached stat
 with the camera's noise models (``CameraConfig.realistic()``: RGB sensor noise, stereo-like
 depth) applied to the recorded clean images and, beside them, noise-free; tunes the
 thresholds per beta on the validation scenes (SPEC 7, union of the two actions) and reports
-on the test scenes in ``benchmarks/results/realistic_flow.md`` and ``.json``.
+on the test scenes in ``benchmarks/results/realistic_flow.md``, with its numbers in
+``realistic_flow.summary.json`` (:func:`summary`) and every number, per scene, in
+``realistic_flow.json`` (not committed: up to 1 MB, written again by ``evaluate``).
 """
 
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import json
 import os
-import platform
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _machine import cpu_model  # noqa: E402
-from _rf_eval import (  # noqa: E402
+from benchmarks import RESULTS
+from benchmarks.experiments.realistic_flow.evaluate import (
     BETAS,
     FLOWS,
     SAMPLES,
@@ -45,8 +43,10 @@ from _rf_eval import (  # noqa: E402
     support_for,
     tune,
     union_mask,
+    validation_scores,
 )
-from _rf_record import GEOMETRIES, Scene, record, recorded  # noqa: E402
+from benchmarks.experiments.realistic_flow.record import GEOMETRIES, Scene, record, recorded
+from cablesim import provenance as pv
 
 # scene counts: what a shared 2-core machine allowed (one interaction ~45 s CPU to simulate)
 VAL_SEEDS, VAL_WANT, VAL_SOLID = range(300, 400), 12, 6
@@ -54,7 +54,6 @@ VAL_SEEDS, VAL_WANT, VAL_SOLID = range(300, 400), 12, 6
 # projection) were chosen (seeds 400-411 were looked at while the remedies were developed;
 # 600-614, 700-714 and 800-811 were scored once for earlier reports and then retired)
 TEST_SEEDS, TEST_WANT, TEST_SOLID = range(900, 1000), 12, 6
-RESULTS = Path(__file__).resolve().parent / "results"
 
 # candidates measured on the validation scenes (noisy): flow back end -> per-sample variants
 EXPLORE_PLAN: dict[str, list[str]] = {
@@ -153,7 +152,7 @@ def explore_rows(val: list[Scene], plan, supports, log) -> list[dict[str, Any]]:
                     sts.append(st)
                 truths = [targets[s.name].truth for s in val]
                 tuned = tune(sts, truths, "correlation")
-                pr = tuned.params[0.4]
+                pr = tuned.rows[0.4].params
                 preds = [union_mask(st, "correlation", pr) for st in sts]
                 row = {"flow": flow, "sample": sample, "support": sup, "params": pr}
                 for board in ("wood", "solid", "all"):
@@ -186,9 +185,9 @@ def evaluate_combo(
     out: dict[str, Any] = {"combo": list(combo), "noisy": noisy, "methods": {}}
     for method in METHODS:
         tuned = tune([v[0] for v in vs], [v[1].truth for v in vs], method)
-        res: dict[str, Any] = {"params": {str(b): tuned.params[b] for b in BETAS}, "test": {}}
+        res: dict[str, Any] = {"params": {str(b): tuned.rows[b].params for b in BETAS}, "test": {}}
         for b in BETAS:
-            preds = [union_mask(st, method, tuned.params[b]) for st, _ in ts]
+            preds = [union_mask(st, method, tuned.rows[b].params) for st, _ in ts]
             truths = [tg.truth for _, tg in ts]
             per = {}
             for board in ("wood", "solid", "all"):
@@ -196,7 +195,7 @@ def evaluate_combo(
                 per[board] = score_row([preds[i] for i in idx], [truths[i] for i in idx], b)
             if b == 0.4:
                 per["fp_near_hose"] = fp_near_hose(preds, [tg for _, tg in ts])
-                per["val"] = tuned.val[b]
+                per["val"] = validation_scores(tuned.rows[b])
             res["test"][str(b)] = per
         out["methods"][method] = res
     return out
@@ -224,7 +223,9 @@ def votes_for(st, method: str, params: dict[str, float]) -> np.ndarray:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(
+        prog="python -m benchmarks.experiments.realistic_flow", description=__doc__
+    )
     sub = ap.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("record")
     r.add_argument("--workers", type=int, default=2)
@@ -285,9 +286,8 @@ def main() -> None:
     val, test = vw + vs, tw + ts
     log(f"validation: {len(vw)} wood + {len(vs)} solid; test: {len(tw)} wood + {len(ts)} solid")
     report: dict[str, Any] = {
-        "date": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        **pv.provenance(),
         "geometry": args.geometry,
-        "machine": f"{platform.platform()}, CPU {cpu_model()}, {os.cpu_count()} cores",
         "scenes": {
             "val_wood": [s.seed for s in vw],
             "val_solid": [s.seed for s in vs],
@@ -347,13 +347,38 @@ def main() -> None:
     report["load"] = {"start": load0, "end": os.getloadavg()}
     report["seconds"] = time.time() - t_start
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps(report, indent=1, default=float))
+    raw, small = args.out.with_suffix(".json"), summary_path(args.out)
+    raw.write_text(json.dumps(report, indent=1, default=float))  # not committed: .gitignore
+    small.write_text(json.dumps(summary(report), indent=1, default=float) + "\n")
     args.out.write_text(render(report))
-    log(f"wrote {args.out} and {args.out.with_suffix('.json')}")
+    log(f"wrote {args.out}, {small} and (every number) {raw}")
+
+
+def summary_path(md: Path) -> Path:
+    """Where the small JSON summary of the report ``md`` goes: ``<name>.summary.json``."""
+    return md.with_name(md.stem + ".summary.json")
+
+
+def summary(report: dict[str, Any], digits: int = 4) -> dict[str, Any]:
+    """The report's JSON without what only the raw file needs: no per-scene scores, no
+    validation exploration, no per-frame timings; scores rounded to ``digits``.  What the
+    markdown tables show stays (means, tuned thresholds, empty counts, proposals)."""
+    drop = {"per_scene", "explore", "timings_cpu_ms_per_frame"}
+
+    def small(x: Any) -> Any:
+        if isinstance(x, dict):
+            return {k: small(v) for k, v in x.items() if k not in drop}
+        if isinstance(x, list | tuple):
+            return [small(v) for v in x]
+        if isinstance(x, float):
+            return round(x, digits)
+        return x
+
+    return small(report)
 
 
 def render(rep: dict[str, Any]) -> str:
-    from _rf_report import render as _render
+    from benchmarks.experiments.realistic_flow.report import render as _render
 
     return _render(rep)
 

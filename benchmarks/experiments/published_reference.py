@@ -6,7 +6,8 @@ on two small synthetic streams whose flows are fed in as the flow predictor's an
 stores inputs and outputs in ``tests/perception/data/published_reference.npz``.  The test
 feeds the same inputs to cablesim's ``published`` variant and compares.
 
-    PYTHONPATH=/path/to/cmcor:/path/to/sklearn .venv/bin/python benchmarks/published_reference.py
+    PYTHONPATH=/path/to/cmcor:/path/to/sklearn \
+        .venv/bin/python -m benchmarks.experiments.published_reference
 
 (cmcor is not a dependency of cablesim; this script is only needed to regenerate the file.)
 """
@@ -19,7 +20,13 @@ import numpy as np
 
 from cablesim.perception.synthetic import Region, SyntheticSpec, synthetic_stream
 
-OUT = Path(__file__).parent.parent / "tests" / "perception" / "data" / "published_reference.npz"
+OUT = (
+    Path(__file__).resolve().parents[2]
+    / "tests"
+    / "perception"
+    / "data"
+    / "published_reference.npz"
+)
 
 
 def cases() -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, float]]:

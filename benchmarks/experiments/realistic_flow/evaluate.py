@@ -1,4 +1,5 @@
-"""Perception half of ``benchmarks/realistic_flow.py``: variants on the recorded streams.
+"""Perception half of ``python -m benchmarks.experiments.realistic_flow``: variants on the
+recorded streams.
 
 A recorded stream is read lean (RGB, arm mask and gripper of every frame; depth and labels of
 the target only), optionally given the camera's noise models (:mod:`cablesim.sim.sensor`,
@@ -9,7 +10,8 @@ filters :func:`cablesim.perception.pipeline.compute_statistics` uses (``check_eq
 shows the result is identical).  What threshold tuning needs of the statistics (|c0|, R^2,
 std(d_phi), vote fractions) is cached per (scene, noise, flow, variant) as float16 maps, so
 the support variants (foreground, contrast: target-frame cues) and the tuning run without
-recomputing flow.
+recomputing flow.  Thresholds are tuned by :mod:`cablesim.perception.tuning` and masks scored
+by :mod:`cablesim.perception.metrics`, the rules of the thesis protocol (SPEC sections 7-8).
 """
 
 from __future__ import annotations
@@ -22,8 +24,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _rf_record import CACHE, TAG, Scene
 
+from benchmarks.experiments.realistic_flow.record import CACHE, TAG, Scene
 from cablesim.perception.actions import action_direction
 from cablesim.perception.correlation import (
     CorrelationAccumulator,
@@ -33,6 +35,8 @@ from cablesim.perception.correlation import (
 from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow
 from cablesim.perception.flow_region import FlowRegion, RegionFlow
 from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
+from cablesim.perception.methods import make_method
+from cablesim.perception.metrics import nanmean, score_mask
 from cablesim.perception.pipeline import StreamStatistics, plan_jobs
 from cablesim.perception.refine import (
     ContrastParams,
@@ -43,6 +47,7 @@ from cablesim.perception.refine import (
     foreground_mask,
 )
 from cablesim.perception.segmentation import SegmentationAccumulator, SegmentationResult
+from cablesim.perception.tuning import TuningResult, TuningRow, tune_thresholds
 
 STATS = CACHE / TAG / "stats"
 
@@ -424,130 +429,27 @@ def stats_for(scene: Scene, noisy: bool, flow: str, sample: str) -> StreamStatis
 
 
 # --------------------------------------------------------------------------------- tuning
-GRID = np.round(np.arange(0.0, 1.0, 0.02), 4)  # c0_min, R2_min, tau_v
-STD_GRID = np.round(np.arange(0.0, 0.05, 0.0005), 6)  # ablation std_min (m)
+#: the thresholds tried: the methods' own grids (:meth:`~cablesim.perception.methods.
+#: SegmentationMethod.grid`), the ablation's std(d_phi) up to 5 cm
+GRIDS: dict[str, dict[str, np.ndarray]] = {
+    "ablation": {"std_min": np.round(np.arange(0.0, 0.05, 0.0005), 6)},
+}
 BETAS = (1.0, 0.5, 0.4, 0.3)
 
 
-def _union_score(st: StreamStatistics, method: str, c0_min: float = 0.0) -> np.ndarray:
-    """Per-pixel score whose ``> t`` is the union (>= 1 vote) mask at threshold t."""
-    acts = st.actions
-    if method == "correlation":
-        s = np.max(
-            [
-                np.where(np.abs(st.correlation[a].c0) > c0_min, st.correlation[a].r2, -1.0)
-                for a in acts
-            ],
-            0,
-        )
-    elif method == "segmentation":
-        s = np.max([st.segmentation[a].fraction for a in acts], 0)
-    elif method == "ablation":
-        s = np.max([st.correlation[a].std_dphi for a in acts], 0)
-    else:
-        raise ValueError(method)
-    if st.support is not None:
-        s = np.where(st.support, s, -1.0)
-    return s
+def tune(
+    stats: Sequence[StreamStatistics], truths: Sequence[np.ndarray], method: str
+) -> TuningResult:
+    """Thresholds maximising the mean F_beta over the sequences, per beta of :data:`BETAS`;
+    union of the actions: :func:`cablesim.perception.tuning.tune_thresholds` (SPEC sections 7
+    and 8: an undefined score, e.g. the precision of an empty prediction, is NaN and left out
+    of the mean)."""
+    return tune_thresholds(stats, truths, method, BETAS, n=1, grid=GRIDS.get(method))
 
 
-def _counts(score: np.ndarray, truth: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, ...]:
-    """tp(t), fp(t) of ``score > t`` for every t of ``grid``, and the truth size (exact)."""
-    b = np.searchsorted(grid, score.ravel(), side="left")  # value > grid[j] iff j < b
-    n = len(grid) + 1
-    t = truth.ravel()
-    pos = np.bincount(b[t], minlength=n)
-    neg = np.bincount(b[~t], minlength=n)
-    # count of b > j = sum_{k > j} hist[k]
-    tp = np.cumsum(pos[::-1])[::-1][1:]
-    fp = np.cumsum(neg[::-1])[::-1][1:]
-    return tp.astype(float), fp.astype(float), int(t.sum())
-
-
-def _prf(tp, fp, npos):
-    with np.errstate(divide="ignore", invalid="ignore"):
-        p = np.where(tp + fp > 0, tp / np.maximum(tp + fp, 1), np.nan)
-        r = tp / max(npos, 1)
-        iou = tp / np.maximum(npos + fp, 1)
-    return p, r, iou
-
-
-def _fb(p, r, beta):
-    b2 = beta * beta
-    p0 = np.nan_to_num(p)
-    den = b2 * p0 + r
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den > 0, (1 + b2) * p0 * r / den, 0.0)
-
-
-class _Sub:
-    """The maps of ``st`` at the pixels of ``live`` only (1-D), for fast tuning."""
-
-    def __init__(self, st: StreamStatistics, live: np.ndarray) -> None:
-        from types import SimpleNamespace as NS
-
-        self.actions = st.actions
-        self.support = None
-        self.correlation = {
-            a: NS(c0=c.c0[live], r2=c.r2[live], std_dphi=c.std_dphi[live])
-            for a, c in st.correlation.items()
-        }
-        self.segmentation = {a: NS(fraction=r.fraction[live]) for a, r in st.segmentation.items()}
-
-
-@dataclass
-class Tuned:
-    method: str
-    params: dict[float, dict[str, float]]  # beta -> thresholds
-    val: dict[float, dict[str, float]]  # beta -> validation scores at those thresholds
-
-
-def tune(stats: Sequence[StreamStatistics], truths: Sequence[np.ndarray], method: str) -> Tuned:
-    """Thresholds maximising the mean F_beta over the sequences (empty prediction: F = 0),
-    per beta; union of the actions.  Same objective and grid as
-    :func:`cablesim.perception.tuning.tune_thresholds` (computed by counting, not sorting)."""
-    if method == "correlation":
-        outer, inner, names = GRID, GRID, ("c0_min", "r2_min")
-    elif method == "segmentation":
-        outer, inner, names = np.array([np.nan]), GRID, (None, "tau_v")
-    else:
-        outer, inner, names = np.array([np.nan]), STD_GRID, (None, "std_min")
-    F = {b: np.zeros((len(outer), len(inner))) for b in BETAS}
-    P = np.zeros((len(outer), len(inner)))
-    Pn = np.zeros_like(P)
-    R = np.zeros_like(P)
-    J = np.zeros_like(P)
-    for st, t in zip(stats, truths, strict=True):
-        # only pixels that can pass some threshold matter (score > 0 at the lowest c0_min)
-        live = _union_score(st, method, -1.0) > 0
-        npos = int(t.sum())
-        sub = _Sub(st, live)
-        tl = t[live]
-        for i, c in enumerate(outer):
-            score = _union_score(sub, method, 0.0 if np.isnan(c) else c)
-            tp, fp, _ = _counts(score, tl, inner)
-            p, r, iou = _prf(tp, fp, npos)
-            P[i] += np.nan_to_num(p)
-            Pn[i] += np.isfinite(p)
-            R[i] += r
-            J[i] += iou
-            for b in BETAS:
-                F[b][i] += _fb(p, r, b)
-    k = len(stats)
-    params, val = {}, {}
-    for b in BETAS:
-        i, j = np.unravel_index(np.argmax(F[b]), F[b].shape)
-        pr = {names[1]: float(inner[j])}
-        if names[0]:
-            pr[names[0]] = float(outer[i])
-        params[b] = pr
-        val[b] = {
-            "precision": P[i, j] / max(Pn[i, j], 1),
-            "recall": R[i, j] / k,
-            "f": F[b][i, j] / k,
-            "iou": J[i, j] / k,
-        }
-    return Tuned(method, params, val)
+def validation_scores(row: TuningRow) -> dict[str, float]:
+    """The validation means at a tuned row's thresholds, as the report names them."""
+    return {"precision": row.precision, "recall": row.recall, "f": row.f_beta, "iou": row.iou}
 
 
 def union_mask(st: StreamStatistics, method: str, pr: dict[str, float]) -> np.ndarray:
@@ -563,49 +465,31 @@ def union_mask(st: StreamStatistics, method: str, pr: dict[str, float]) -> np.nd
             m = union_mask(one, method, pr)
             out |= grow_by_colour(m, st.guide, st.grow, st.support)
         return out
-    if method == "correlation":
-        return _union_score(st, method, pr["c0_min"]) > pr["r2_min"]
-    if method == "segmentation":
-        return _union_score(st, method) > pr["tau_v"]
-    return _union_score(st, method) > pr["std_min"]
+    m = make_method(method)
+    outer = None if m.outer_threshold is None else pr[m.outer_threshold]
+    return m.score(st, 1, outer) > pr[m.threshold]
 
 
 def score_row(preds: Sequence[np.ndarray], truths: Sequence[np.ndarray], beta: float = 0.4) -> dict:
-    """Mean over sequences (SPEC 7): precision over non-empty predictions (nanmean), recall,
-    F_beta (0 for an empty prediction) and IoU over all."""
-    P, R, F, J = [], [], [], []
-    if not preds:
-        nan = float("nan")
-        return {
-            "precision": nan,
-            "recall": nan,
-            "f": nan,
-            "iou": nan,
-            "empty": 0,
-            "n": 0,
-            "per_scene": [],
-        }
-    for m, t in zip(preds, truths, strict=True):
-        tp = float((m & t).sum())
-        fp = float(m.sum()) - tp
-        npos = float(t.sum())
-        p = tp / (tp + fp) if tp + fp > 0 else np.nan
-        r = tp / max(npos, 1)
-        P.append(p)
-        R.append(r)
-        F.append(float(_fb(np.array(p), np.array(r), beta)))
-        J.append(tp / max(npos + fp, 1))
-    P = np.array(P)
+    """Mean over sequences of :func:`cablesim.perception.metrics.score_mask` (SPEC sections 7
+    and 8: NaN scores, e.g. the precision of an empty prediction, left out of the means);
+    ``empty``: the sequences whose prediction was empty."""
+    scores = [score_mask(m, t, (beta,)) for m, t in zip(preds, truths, strict=True)]
+    P = np.array([s.precision for s in scores], float)
+
+    def real(x: float) -> float | None:
+        return None if not np.isfinite(x) else float(x)
+
     return {
-        "precision": float(np.nanmean(P)) if np.isfinite(P).any() else float("nan"),
-        "recall": float(np.mean(R)),
-        "f": float(np.mean(F)),
-        "iou": float(np.mean(J)),
+        "precision": nanmean(P),
+        "recall": nanmean(s.recall for s in scores),
+        "f": nanmean(s.f[beta] for s in scores),
+        "iou": nanmean(s.iou for s in scores),
         "empty": int(np.sum(~np.isfinite(P))),
-        "n": len(P),
+        "n": len(scores),
         "per_scene": [
-            {"precision": None if not np.isfinite(p) else float(p), "recall": r, "f": f, "iou": j}
-            for p, r, f, j in zip(P, R, F, J, strict=True)
+            {"precision": real(s.precision), "recall": s.recall, "f": s.f[beta], "iou": s.iou}
+            for s in scores
         ],
     }
 

@@ -1,5 +1,6 @@
-"""Recording half of ``benchmarks/realistic_flow.py``: one grasp interaction per scene, recorded
-once into a cache outside the repository and reused by every perception variant.
+"""Recording half of ``python -m benchmarks.experiments.realistic_flow``: one grasp
+interaction per scene, recorded once into a cache outside the repository and reused by every
+perception variant.
 
 Each scene: ``EpisodeConfig.of(seed=s, perturb=PerturbConfig(enabled=True))`` with kinematic arm
 masks captured (``capture.arm_masks``), ground truth on, the camera noise-free (the noise

@@ -12,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from cablesim.benchmark import reference as ref
 from cablesim.perception.metrics import nanmean
 from cablesim.perception.tuning import ThresholdCounts, tune_counts
+from cablesim.thesis import reference as ref
 
 METHODS = ("segmentation", "ablation", "correlation")
 N_NAME = {1: "union", 2: "intersection"}

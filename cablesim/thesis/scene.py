@@ -29,10 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from cablesim.benchmark.config import METHODS
 from cablesim.dataset.generate import failure, outcome_of, scene_from
 from cablesim.errors import CablesimError
 from cablesim.errors import outcome_of as error_outcome
+from cablesim.thesis.config import METHODS
 
 CODE_DIRS = ("sim", "episode", "panda")  # the code that decides a simulated stream
 

@@ -1,11 +1,11 @@
 """``cablesim benchmark thesis``: the protocol of thesis chapters 5 and 6 in simulation.
 
-    from cablesim.benchmark import ThesisConfig, run_thesis
+    from cablesim.thesis import ThesisConfig, run_thesis
     report = run_thesis(ThesisConfig(validation=(1000, 1008), test=(2000, 2012)))
 
 1. Interactions (tables 6.4/6.5): every validation and test scene, with and without the
    neighbour perturbation, one grasp and two actions; for each flow back end the three methods'
-   confusion counts over their threshold grids (:mod:`cablesim.benchmark.scene`).  ``flows``
+   confusion counts over their threshold grids (:mod:`cablesim.thesis.scene`).  ``flows``
    and ``methods`` take any spec of the registries (a plug-in's name or ``MODULE:CLASS``,
    ``docs/plugins.md``): a user's flow back end or method gets its own rows.  Thresholds
    are tuned per beta on validation and scored on test (SPEC section 7).
@@ -20,26 +20,25 @@ Every scene is a job (:mod:`cablesim.jobs`): run locally in worker processes or 
 result file each, resumable; the report (``report.md``, ``report.json``, plots) is recomputed
 from the files.  A run killed at any point and started again writes the same files as one that
 never stopped, except what records the run itself: ``results/timings.jsonl`` and the date,
-machine and run-time lines of ``report.md`` (``report.json`` holds no time).  ``out/.lock``
+machine and run-time lines of ``report.md`` (:mod:`cablesim.provenance`) (``report.json`` holds no time).  ``out/.lock``
 refuses a second run into the same folder while one is going.
 """
 
 from __future__ import annotations
 
-import datetime as dt
 import json
 import os
-import platform
 import time
 from pathlib import Path
 from typing import Any
 
-from cablesim.benchmark import report as rp
-from cablesim.benchmark.config import METHODS, SceneSize, ThesisConfig
+from cablesim import provenance as pv
 from cablesim.files import OutputLock, write_text
 from cablesim.jobs import Summary, execute, load_results, ray_init, ray_shutdown
 from cablesim.jsonutil import json_default
 from cablesim.progress import Progress, Say
+from cablesim.thesis import report as rp
+from cablesim.thesis.config import METHODS, SceneSize, ThesisConfig
 
 THESIS_F04 = (0.18, 0.86)  # table 6.3: c0_min, R2_min for beta 0.4
 
@@ -152,11 +151,6 @@ def _run_thesis(
     return doc
 
 
-def _machine() -> str:
-    load = " ".join(f"{x:.1f}" for x in os.getloadavg())
-    return f"{platform.platform()}, {os.cpu_count()} cores, load average {load}"
-
-
 def write_report(
     cfg: ThesisConfig, doc: dict[str, Any], records: list[dict[str, Any]], out: Path
 ) -> None:
@@ -169,7 +163,8 @@ def write_report(
     lines = [
         "# The thesis's tables in simulation (`cablesim benchmark thesis`)",
         "",
-        f"- date: {dt.datetime.now(dt.UTC).strftime('%Y-%m-%d %H:%M UTC')}; machine: {_machine()}",
+        f"- date: {pv.utc_date()}; commit {pv.git_commit()}; machine: {pv.machine()}; load "
+        f"average {pv.load_average(1)}",
         f"- scenes: validation seeds {cfg.validation[0]}-{cfg.validation[1] - 1}, test seeds "
         f"{cfg.test[0]}-{cfg.test[1] - 1}; {sc.width}x{sc.height}, {sc.hoses} hoses, K_p = "
         f"{sc.periods}, one grasp, two actions (along, across), |D| = 2 cm",
