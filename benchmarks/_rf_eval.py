@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from _rf_record import CACHE, TAG, Scene
 
+from cablesim.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.perception.actions import action_direction
 from cablesim.perception.correlation import (
     CorrelationAccumulator,
@@ -32,7 +33,6 @@ from cablesim.perception.correlation import (
 )
 from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow
 from cablesim.perception.flow_region import FlowRegion, RegionFlow
-from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.perception.pipeline import StreamStatistics, plan_jobs
 from cablesim.perception.refine import (
     ContrastParams,

@@ -33,8 +33,8 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from _machine import cpu_model  # noqa: E402  (benchmarks/ is on sys.path)
 
+from cablesim.frames import LABEL_ROBOT  # noqa: E402
 from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses  # noqa: E402
-from cablesim.perception.frames import LABEL_ROBOT  # noqa: E402
 from cablesim.sim.camera import SimCamera  # noqa: E402
 from cablesim.sim.config import SceneConfig  # noqa: E402
 from cablesim.sim.world import World  # noqa: E402

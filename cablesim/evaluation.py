@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from cablesim.perception.frames import Stream
+from cablesim.frames import Stream
 from cablesim.perception.metrics import GRADES, grade_proposal, score_mask
 
 __all__ = ["GRADES", "Evaluator", "f04_reward", "scores_dict"]

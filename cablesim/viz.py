@@ -21,7 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 WHITE = (255, 255, 255)

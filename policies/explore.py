@@ -40,10 +40,10 @@ from scipy import ndimage
 from cablesim.config import to_dict
 from cablesim.errors import InputError
 from cablesim.evaluation import scores_dict
+from cablesim.frames import Intrinsics, Stream
 from cablesim.jsonutil import jsonable
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.flow import make_flow
-from cablesim.perception.frames import Intrinsics, Stream
 from cablesim.perception.geometry import eccentricity, segment_pose
 from cablesim.perception.grasp_sampler import GraspSampler
 from cablesim.perception.pipeline import StreamSegmentation, segment_stream

@@ -39,7 +39,7 @@ from cablesim.calibration.transforms import (
     rotation_log,
 )
 from cablesim.errors import CalibrationError
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 
 MIN_POSES = 5  # usable views for a calibration
 

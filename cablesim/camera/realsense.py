@@ -25,7 +25,7 @@ import numpy as np
 
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.errors import InputError, RecordingError
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 
 
 def _rs():

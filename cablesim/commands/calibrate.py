@@ -169,7 +169,7 @@ def _sim_devices(args: argparse.Namespace) -> tuple[Any, Any, Any, np.ndarray, d
         robot=RobotConfig(hand_board=True),
     )
     session = SimSession.build(EpisodeConfig(scene=scene))
-    from cablesim.robot.pose import Pose
+    from cablesim.pose import Pose
 
     base = Pose(*session.world.panda_base).matrix()
     return session, session.robot, session.camera, base, {"scene": scene.to_dict()}

@@ -33,7 +33,7 @@ from cablesim.commands._args import (
     show_config,
     write_config,
 )
-from cablesim.perception.frames import LABEL_ROBOT, Stream
+from cablesim.frames import LABEL_ROBOT, Stream
 from cablesim.recording import RecordingWriter
 from cablesim.sim.config import EpisodeConfig
 from cablesim.viz import (

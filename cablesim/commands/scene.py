@@ -32,7 +32,7 @@ from cablesim.commands._args import (
 )
 from cablesim.config import to_dict
 from cablesim.errors import InputError
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT
 from cablesim.sim.config import BACKGROUNDS, SceneConfig
 from cablesim.viz import (
     colour_flow,

@@ -36,9 +36,9 @@ import numpy as np
 
 from cablesim.commands._args import add_grow_colour_argument
 from cablesim.errors import InputError, RecordingError
+from cablesim.frames import Stream
 from cablesim.jsonutil import json_default
 from cablesim.perception.flow import FLOW_BACKENDS, check_flow, make_flow
-from cablesim.perception.frames import Stream
 from cablesim.perception.methods import METHODS, check_method, make_method
 from cablesim.perception.metrics import BETAS, score_mask
 from cablesim.perception.pipeline import params_for_beta, segment_stream

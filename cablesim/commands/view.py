@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError, RecordingError
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT, Frame
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT, Frame
 from cablesim.recording import FORMAT, Recording
 from cablesim.viz import LABEL_COLOURS, ROBOT_COLOUR
 

@@ -31,9 +31,9 @@ import numpy as np
 from cablesim.episode.config import ActionConfig, GraspConfig, InteractionConfig, RetreatConfig
 from cablesim.outcomes import Outcome
 from cablesim.panda.description import RETRACT_QPOS
+from cablesim.pose import Pose, grasp_pose
 from cablesim.robot.base import MoveResult, Robot
 from cablesim.robot.grasping import avoiding_hoses, move_joints_safely
-from cablesim.robot.pose import Pose, grasp_pose
 
 #: The default approach: the hand points at the board (world +x); the board normal is -x.
 DEFAULT_APPROACH = (1.0, 0.0, 0.0)

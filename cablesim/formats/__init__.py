@@ -8,7 +8,7 @@
 - cablesim's own recordings are :mod:`cablesim.recording`.
 
 ``detect_layout(path)`` names the layout of a path and ``read_any(path)`` reads any
-interaction layout as a :class:`~cablesim.perception.frames.Stream`.  NumPy/OpenCV only: this
+interaction layout as a :class:`~cablesim.frames.Stream`.  NumPy/OpenCV only: this
 package never imports the simulator.
 """
 
@@ -19,7 +19,7 @@ import os
 from pathlib import Path
 
 from cablesim.errors import RecordingError
-from cablesim.perception.frames import Stream
+from cablesim.frames import Stream
 
 LAYOUTS = ("cablesim-recording", "mcor", "movingcables", "realsense")
 

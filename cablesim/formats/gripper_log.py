@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from cablesim.errors import InputError, RecordingError
-from cablesim.perception.frames import TARGET_ACTION, Frame, Stream
+from cablesim.frames import TARGET_ACTION, Frame, Stream
 
 FORMAT = "cablesim-gripper-log"
 VERSION = 1

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cablesim.checks import as_depth, as_mask, valid_depth
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_depth, as_mask, valid_depth
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 
 
 @dataclass

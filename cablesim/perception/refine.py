@@ -62,9 +62,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from cablesim.checks import as_flow
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_flow
-from cablesim.perception.frames import Frame, Intrinsics
+from cablesim.frames import Frame, Intrinsics
 
 
 @dataclass(frozen=True)

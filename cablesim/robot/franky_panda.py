@@ -48,8 +48,8 @@ from cablesim.errors import ConfigError
 from cablesim.outcomes import Outcome
 from cablesim.panda.description import FLANGE_T_TCP, HAND_OFFSET, MAX_OPENING
 from cablesim.panda.ik import ArmModel, ArmModelChecks, Obstacle
+from cablesim.pose import Pose
 from cablesim.robot.base import Frame, MoveResult, Robot
-from cablesim.robot.pose import Pose
 
 if TYPE_CHECKING:  # pragma: no cover
     import franky

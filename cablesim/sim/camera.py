@@ -41,7 +41,7 @@ import numpy as np
 
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.errors import InputError
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT, Intrinsics
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT, Intrinsics
 from cablesim.seeding import stream
 
 if TYPE_CHECKING:

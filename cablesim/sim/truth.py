@@ -23,8 +23,8 @@ import numpy as np
 from cablesim.camera.base import CameraImage
 from cablesim.episode.clock import Tick
 from cablesim.episode.truth import ActionTruth, FrameSink, HosePointProbe
-from cablesim.perception.frames import Frame, FrameTruth
-from cablesim.robot.pose import Pose
+from cablesim.frames import Frame, FrameTruth
+from cablesim.pose import Pose
 
 #: A hose farther than this from the closed hand is not held (simulation check).
 GRASP_MAX_DISTANCE = 0.02

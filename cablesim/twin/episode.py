@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from cablesim.evaluation import scores_dict
+from cablesim.frames import Stream
 from cablesim.jsonutil import jsonable
-from cablesim.perception.frames import Stream
 from cablesim.perception.grasp_sampler import GraspSampler, SamplingResult
 from cablesim.perception.metrics import grade_proposal
 from cablesim.perception.pipeline import StreamSegmentation, segment_stream

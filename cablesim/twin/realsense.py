@@ -28,7 +28,7 @@ import numpy as np
 
 from cablesim.camera.realsense import RealSenseCamera
 from cablesim.errors import InputError
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 
 
 def _rs():

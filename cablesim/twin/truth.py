@@ -33,8 +33,8 @@ import numpy as np
 from cablesim.camera.base import CameraImage
 from cablesim.episode.clock import Tick
 from cablesim.episode.truth import ActionTruth, FrameSink, HosePointProbe
-from cablesim.perception.frames import Frame, FrameTruth
-from cablesim.robot.pose import Pose
+from cablesim.frames import Frame, FrameTruth
+from cablesim.pose import Pose
 from cablesim.sim.truth import GRASP_MAX_DISTANCE, MotionLog
 
 

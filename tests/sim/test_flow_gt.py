@@ -10,7 +10,7 @@ import pytest
 
 import cablesim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from cablesim.errors import InputError
-from cablesim.perception.frames import LABEL_BACKGROUND
+from cablesim.frames import LABEL_BACKGROUND
 from cablesim.sim.camera import SimCamera
 from cablesim.sim.config import CameraConfig, RobotConfig, SceneConfig
 from cablesim.sim.flow_gt import flow_to_target, gt_flow
