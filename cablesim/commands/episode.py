@@ -36,6 +36,7 @@ from cablesim.commands._args import (
 from cablesim.frames import LABEL_ROBOT, Stream
 from cablesim.recording import RecordingWriter
 from cablesim.sim.config import EpisodeConfig
+from cablesim.sim.session import simulate_episode
 from cablesim.viz import (
     SEGMENT_COLOUR,
     colour_labels,
@@ -85,7 +86,6 @@ def contact_sheet(
 
 
 def run(args: argparse.Namespace) -> int:
-    from cablesim.sim.session import simulate_episode
 
     cfg = config_from_args(args)
     if args.show_config:

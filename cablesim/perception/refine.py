@@ -57,7 +57,7 @@ Per mask, after thresholding (``grow``, :class:`GrowParams`; off by default):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import cv2
 import numpy as np
@@ -165,7 +165,6 @@ class RefineParams:
         )
 
     def describe(self) -> dict:
-        from dataclasses import asdict
 
         return asdict(self)
 

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cablesim.errors import CablesimError, InputError
+from cablesim.robot.franky_panda import franka_sim_mjcf
 
 HOST = "127.0.0.1"  # never anything else
 PORTS = (1337, 1338)  # libfranka's arm and gripper ports (fixed by the protocol)
@@ -345,7 +346,6 @@ class FrankaSimServer:
     def start(self) -> FrankaSimServer:
         """Start the server and wait until it accepts a client; raises
         :class:`FrankaSimUnavailable` when it cannot run here, ``RuntimeError`` when it died."""
-        from cablesim.robot.franky_panda import franka_sim_mjcf
 
         python = server_python()
         if python is None:

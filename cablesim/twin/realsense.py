@@ -33,7 +33,7 @@ from cablesim.frames import Intrinsics
 
 def _rs():
     try:
-        import pyrealsense2 as rs
+        import pyrealsense2 as rs  # lazy: optional heavy package
     except ImportError as e:  # pragma: no cover - depends on the machine
         raise ImportError(
             "the twin's RealSense feed needs pyrealsense2: pip install 'cablesim[real]'"
