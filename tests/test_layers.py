@@ -66,20 +66,16 @@ RULES = {
 GROUND_FORBIDDEN_THIRD_PARTY = ("mujoco", "mink", "cv2", "scipy", "torch", "ray", "matplotlib")
 
 # Optional heavy packages: an extra that may be missing (torch, ray, rerun, franky,
-# pyrealsense2, stable_baselines3, notebook tools) or a binary that is slow to load and needed
-# by one path only (imageio_ffmpeg's ffmpeg).  Only these may be imported inside a function.
+# pyrealsense2, stable_baselines3) or a binary needed by one path only (imageio_ffmpeg's
+# ffmpeg, for H.264 videos).  Only these may be imported inside a function.
 LAZY_ALLOWED = (
     "torch",
-    "torchvision",
     "ray",
     "rerun",
     "franky",
     "pyrealsense2",
     "imageio_ffmpeg",
     "stable_baselines3",
-    "dm_env",
-    "nbformat",
-    "nbclient",
 )
 MARKER = "# lazy: optional heavy package"
 
