@@ -25,8 +25,8 @@ import numpy as np
 
 from benchmarks import RESULTS, write_results
 from cablesim import provenance as pv
+from cablesim.frames import LABEL_ROBOT
 from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses
-from cablesim.perception.frames import LABEL_ROBOT
 from cablesim.sim.camera import SimCamera
 from cablesim.sim.config import SceneConfig
 from cablesim.sim.world import World

@@ -11,7 +11,7 @@ import argparse
 import importlib
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 
 import cablesim
 from cablesim.commands._args import output_path
@@ -31,13 +31,20 @@ SUBCOMMANDS: dict[str, str] = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(commands: Iterable[str] | None = None) -> argparse.ArgumentParser:
+    """The parser with every subcommand; the arguments of those in ``commands`` only (all when
+    None): a subcommand's module imports what it runs (the simulator, perception), so that
+    ``cablesim --help`` and ``cablesim episode`` load only what they need."""
+    wanted = set(SUBCOMMANDS if commands is None else commands)
     parser = argparse.ArgumentParser(
         prog="cablesim", description="Simulation-first interactive perception of cables."
     )
     parser.add_argument("--version", action="version", version=f"cablesim {cablesim.__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, help_text in SUBCOMMANDS.items():
+        if name not in wanted:
+            sub.add_parser(name, help=help_text)
+            continue
         module = importlib.import_module(f"cablesim.commands.{name}")
         p = sub.add_parser(name, help=help_text, description=module.__doc__)
         module.add_arguments(p)
@@ -51,7 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run a subcommand; every expected failure (bad input, a file that cannot be written, an
     interruption) ends in one line on stderr and a non-zero exit status, never a traceback."""
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    # the subcommand is the first word that is no option (the top level has only options)
+    command = next((a for a in argv if not a.startswith("-")), None)
+    parser = build_parser([command] if command in SUBCOMMANDS else [])
     args = parser.parse_args(argv)
     prefix = f"cablesim {args.command}"
     try:

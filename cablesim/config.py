@@ -27,6 +27,8 @@ import warnings
 from collections.abc import Callable, Mapping
 from typing import Any, ClassVar, TypeVar
 
+import numpy as np
+
 from cablesim.errors import ConfigError
 
 T = TypeVar("T")
@@ -65,20 +67,12 @@ def _short(value: Any) -> str:
 
 def is_int(value: Any) -> bool:
     """An integer (Python or NumPy), but not a bool."""
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool | _np_bool())
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool | np.bool_)
 
 
 def is_real(value: Any) -> bool:
     """A real number (Python or NumPy, int or float), but not a bool."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool | _np_bool())
-
-
-def _np_bool() -> type:
-    try:
-        import numpy as np
-    except ImportError:  # pragma: no cover - numpy is a dependency
-        return bool
-    return np.bool_
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
 
 
 @functools.cache
@@ -137,7 +131,7 @@ def check_value(field: str, value: Any, hint: Any, error: ErrorFactory = ConfigE
             check_value(f"{field}[{i}]", v, a, error)
         return
     if hint is bool:
-        if not isinstance(value, bool | _np_bool()):
+        if not isinstance(value, bool | np.bool_):
             raise error(field, f"must be true or false, got {_short(value)}")
         return
     if hint is int:

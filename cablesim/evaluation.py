@@ -17,8 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from cablesim.perception.frames import Stream
+from cablesim.frames import Stream
 from cablesim.perception.metrics import GRADES, grade_proposal, score_mask
+from cablesim.sim.flow_gt import gt_flow
 
 __all__ = ["GRADES", "Evaluator", "f04_reward", "scores_dict"]
 
@@ -92,7 +93,6 @@ class Evaluator:
         """Exact flow new -> previous (new(p) = previous(p + f)); 0 where undefined."""
         if new is None or previous is None:
             return None
-        from cablesim.sim.flow_gt import gt_flow
 
         flow, valid = gt_flow(new, previous)[:2]
         return np.where(valid[..., None], flow, 0.0).astype(np.float32)

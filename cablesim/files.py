@@ -35,6 +35,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
 
+import cv2
 import numpy as np
 
 from cablesim.errors import DiskFullError, OutputBusyError, RecordingError
@@ -103,7 +104,6 @@ def write_text(path: str | os.PathLike[str], text: str) -> Path:
 def write_image(path: str | os.PathLike[str], img: np.ndarray) -> Path:
     """Encode ``img`` (OpenCV's channel order) by the file's suffix and write it atomically:
     the same bytes ``cv2.imwrite`` writes, with a named error when the disk is full."""
-    import cv2
 
     path = Path(path)
     ok, buf = cv2.imencode(path.suffix or ".png", img)

@@ -35,8 +35,10 @@ cluster's image must have it installed, and runners that write data files (datas
 
 from __future__ import annotations
 
+import ctypes
 import importlib
 import json
+import multiprocessing as mp
 import os
 import signal
 import threading
@@ -44,9 +46,13 @@ import time
 import traceback
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from tqdm import tqdm
 
 from cablesim.errors import ConfigError, DiskFullError, InputError
 from cablesim.files import (
@@ -180,8 +186,6 @@ def exit_with_parent() -> None:
     exists, and a thread that watches the parent's process id everywhere."""
     parent = os.getppid()
     try:
-        import ctypes
-
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
     except (OSError, AttributeError):  # pragma: no cover - not Linux
         pass
@@ -229,7 +233,6 @@ class Summary:
 
 
 def _bar(total: int, desc: str, enabled: bool) -> Any:
-    from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, disable=not enabled, unit="job", dynamic_ncols=True)
 
@@ -249,9 +252,6 @@ def _local(pending: list[Job], out_dir: str, workers: int, done: Callable) -> No
         for job in pending:
             done(run_job(job, out_dir))
         return
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
 
     todo = list(pending)
     while todo:
@@ -309,7 +309,7 @@ def _crashed(job: Job) -> dict[str, Any]:
 
 def _import_ray() -> Any:
     try:
-        import ray
+        import ray  # lazy: optional heavy package
     except ImportError as e:  # pragma: no cover - depends on the install
         raise ConfigError("ray", "Ray is not installed: pip install -e '.[cluster]'") from e
     return ray

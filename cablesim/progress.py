@@ -16,6 +16,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from tqdm import tqdm
+
 Say = Callable[[str], None]
 
 
@@ -44,7 +46,6 @@ class Progress:
         """A tqdm progress bar on stderr for ``total`` steps (``update(n)``, ``set_postfix``),
         disabled when the printer is or stderr is not a terminal (a log file keeps the plain
         lines); lines said meanwhile print above it."""
-        from tqdm import tqdm
 
         bar = tqdm(
             total=total,

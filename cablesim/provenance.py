@@ -64,9 +64,7 @@ def load_average(digits: int = 2) -> str:
 
 def git_commit() -> str:
     """The cablesim checkout's short commit, marked when tracked files have changes."""
-    import cablesim
-
-    root = Path(cablesim.__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[1]
     try:
         out = subprocess.run(
             ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],

@@ -27,14 +27,19 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.calibration import load_calibration
 from cablesim.camera.base import Camera
+from cablesim.camera.realsense import RealSenseCamera
 from cablesim.config import Config, check_positive
 from cablesim.episode.clock import PlanningClock, StreamClock
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.session import Session
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
+from cablesim.panda.ik import Obstacle
 from cablesim.robot.base import Robot
+from cablesim.robot.dry_run import DryRunRobot
+from cablesim.robot.franky_panda import FrankyPanda
 from cablesim.robot.guard import GuardedRobot, SafetyConfig
 
 #: The default scene's static obstacles in the world frame (centre xyz, half sizes xyz): the
@@ -94,7 +99,6 @@ class RealConfig(Config):
 
 def open_camera(spec: str, width: int, height: int, fps: int, T_world_camera: Any) -> Camera:
     """``realsense`` (the first camera), ``realsense:SERIAL`` or ``realsense:FILE.db3``."""
-    from cablesim.camera.realsense import RealSenseCamera
 
     _, _, arg = spec.partition(":")
     if arg and (arg.endswith(".db3") or Path(arg).exists()):
@@ -120,10 +124,6 @@ class RealSession(Session):
     def open(cls, cfg: RealConfig, dry_run: bool = False) -> RealSession:
         """Connect to the robot, open the camera, read the calibration (errors name the file or
         the field before anything moves)."""
-        from cablesim.calibration import load_calibration
-        from cablesim.panda.ik import Obstacle
-        from cablesim.robot.dry_run import DryRunRobot
-        from cablesim.robot.franky_panda import FrankyPanda
 
         cfg = cfg.validate()
         cal = load_calibration(cfg.calibration)

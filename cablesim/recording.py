@@ -56,8 +56,8 @@ import numpy as np
 
 from cablesim.errors import DiskFullError, InputError, RecordingError
 from cablesim.files import disk_full_error
+from cablesim.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.jsonutil import json_default
-from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
 
 FORMAT = "cablesim-recording"
 VERSION = 1

@@ -33,7 +33,15 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from cablesim import provenance as pv
+from cablesim.config import override
+from cablesim.errors import outcome_of
+from cablesim.files import write_text
+from cablesim.jobs import exit_with_parent
+from cablesim.sim.config import EpisodeConfig
+from cablesim.sim.session import simulate_episode
 
 #: what differs between two runs of the same seeds (timings, date, load): not compared
 VOLATILE = {
@@ -47,8 +55,6 @@ def episode_config(assignments: Sequence[str] = (), seed: int = 0) -> Any:
     """The default ``EpisodeConfig`` of ``seed`` with ``FIELD=VALUE`` assignments applied (the
     fields of ``cablesim explore --show-config`` without their ``episode.`` prefix), checked;
     a bad field or value raises ``cablesim.errors.ConfigError`` naming it."""
-    from cablesim.config import override
-    from cablesim.sim.config import EpisodeConfig
 
     cfg = EpisodeConfig.of(seed=seed)
     for assignment in assignments:
@@ -59,7 +65,6 @@ def episode_config(assignments: Sequence[str] = (), seed: int = 0) -> Any:
 def _worker_init() -> None:
     """Workers leave Ctrl-C to the parent, which cancels what is queued and stops them, and
     die with it when it is killed."""
-    from cablesim.jobs import exit_with_parent
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     exit_with_parent()
@@ -108,12 +113,6 @@ def run_seed(
     the seed replaced); never raises: an error is recorded as a named outcome."""
     if cache_dir is not None:
         os.environ["CABLESIM_CACHE"] = cache_dir
-    import numpy as np
-
-    import cablesim  # noqa: F401  (headless GL before mujoco)
-    from cablesim.errors import outcome_of
-    from cablesim.sim.config import EpisodeConfig
-    from cablesim.sim.session import simulate_episode
 
     t0, c0 = time.perf_counter(), _cpu()
     row: dict[str, Any] = {"seed": seed}
@@ -261,7 +260,6 @@ def run_sweep(
     episode config ``config`` (as a dict; None: the default), made by ``config_changes``
     (``FIELD=VALUE``, recorded and compared on resume); returns the :func:`summary` of the
     seeds that finished.  Ctrl-C stops the workers and writes what finished."""
-    from cablesim.files import write_text
 
     runner = runner or run_seed
     seeds = list(seeds)

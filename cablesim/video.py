@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import cv2
+import imageio.v2 as imageio
 import numpy as np
 
 ENCODERS = ("h264", "mp4v")
@@ -106,8 +107,6 @@ class VideoWriter:
                 self._gif = []
                 return self.final_path
         if self._gif:
-            import imageio.v2 as imageio
-
             gif = self.path.with_suffix(".gif")
             imageio.mimsave(gif, self._gif[::2], duration=2.0 / self.fps, loop=0)
             self.final_path, self.encoder = gif, "gif"
@@ -133,7 +132,7 @@ def _pad(frame: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 def _open_h264(path: Path, size: tuple[int, int], fps: float, crf: int) -> Any:
     """A started imageio-ffmpeg frame sink writing H.264, or None if it cannot start."""
     try:
-        import imageio_ffmpeg
+        import imageio_ffmpeg  # lazy: optional heavy package
     except ImportError:
         return None
     try:

@@ -21,7 +21,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
+from cablesim.errors import RecordingError
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 WHITE = (255, 255, 255)
@@ -161,8 +162,6 @@ def _rgb(img: np.ndarray) -> np.ndarray:
 def write_png(path: str | Path, rgb: np.ndarray) -> None:
     """Write an RGB uint8 image as PNG; ``RecordingError`` if it cannot be written."""
     if not cv2.imwrite(str(path), np.ascontiguousarray(_rgb(rgb)[..., ::-1])):
-        from cablesim.errors import RecordingError
-
         raise RecordingError(f"{path}: could not be written")
 
 

@@ -69,8 +69,16 @@ import numpy as np
 from gymnasium import spaces
 
 from cablesim.config import Config, check_int, check_number, moved_fields, to_dict
-from cablesim.errors import CablesimError, ConfigError, InputError
+from cablesim.errors import CablesimError, ConfigError, InputError, UnreachableError
+from cablesim.evaluation import f04_reward
+from cablesim.perception.flow import DISFlow
+from cablesim.perception.geometry import line_segment_mask
+from cablesim.perception.pipeline import segment_stream
+from cablesim.policies.merge import VoteMerger, warp_votes
 from cablesim.sim.config import EPISODE_SHORTCUTS, EpisodeConfig
+from cablesim.sim.session import SimSession
+from cablesim.sim.world import World
+from cablesim.viz import overlay_votes
 
 PRIMITIVES = ("grasp", "push")
 FLOWS = ("oracle", "dis", "farneback")  # RAFT needs a checkpoint: not offered here
@@ -242,7 +250,6 @@ class HoseExploreEnv(gym.Env):
     # ------------------------------------------------------------------ set-up
     def _scene(self, scene_seed: int) -> tuple[Any, Any]:
         """The world (and camera) of ``scene_seed``, built once and reused across resets."""
-        from cablesim.sim.world import World
 
         if self._world is None or self._world_seed != scene_seed:
             if self._camera is not None:
@@ -255,10 +262,6 @@ class HoseExploreEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        from cablesim.errors import UnreachableError
-        from cablesim.perception.flow import DISFlow
-        from cablesim.policies.merge import VoteMerger
-        from cablesim.sim.session import SimSession
 
         if seed is not None and (not isinstance(seed, int | np.integer) or seed < 0):
             raise InputError(f"reset seed must be None or an integer >= 0, got {seed!r}")
@@ -306,9 +309,6 @@ class HoseExploreEnv(gym.Env):
     def step(
         self, action: dict[str, Any]
     ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
-        from cablesim.evaluation import f04_reward
-        from cablesim.perception.pipeline import segment_stream
-        from cablesim.policies.merge import warp_votes
 
         if self._session is None:
             raise CablesimError("call reset() before step() (and again after close())")
@@ -348,7 +348,6 @@ class HoseExploreEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _line_segment(self, point: np.ndarray, angle: float) -> np.ndarray | None:
-        from cablesim.perception.geometry import line_segment_mask
 
         cam = self.config.episode.scene.camera
         h, w = cam.height, cam.width
@@ -402,7 +401,6 @@ class HoseExploreEnv(gym.Env):
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array" or self._image is None:
             return None
-        from cablesim.viz import overlay_votes
 
         votes = self._merger.votes if self._merger.votes is not None else None
         img = self._image.rgb if votes is None else overlay_votes(self._image.rgb, votes)

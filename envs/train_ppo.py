@@ -114,7 +114,7 @@ def train_and_evaluate(
 ) -> PPORun:
     """Train PPO for ``steps`` environment steps and evaluate it (module docstring)."""
     try:
-        from stable_baselines3 import PPO
+        from stable_baselines3 import PPO  # lazy: optional heavy package
     except ImportError as e:  # the rl extra
         raise CablesimError("stable-baselines3 is not installed: pip install -e '.[rl]'") from e
     for name, value in (("steps", steps), ("n_steps", n_steps), ("n_epochs", n_epochs)):
@@ -207,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--torch-threads", type=int, default=None, help="torch.set_num_threads")
     args = ap.parse_args(argv)
     if args.torch_threads is not None:
-        import torch
+        import torch  # lazy: optional heavy package
 
         torch.set_num_threads(args.torch_threads)
     seeds = tuple(int(s) for s in args.eval_seeds.split(",") if s.strip())

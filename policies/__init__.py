@@ -12,6 +12,7 @@ the random-grasp and push baselines), ``merge`` (votes carried between target fr
 from cablesim.sim.config import PerturbConfig
 
 from .config import STRATEGIES, ExploreConfig
+from .explore import explore
 from .merge import VoteMerger, warp_votes
 
 __all__ = [
@@ -22,11 +23,3 @@ __all__ = [
     "explore",
     "warp_votes",
 ]
-
-
-def __getattr__(name: str):  # lazy: explore builds simulations
-    if name == "explore":
-        from .explore import explore
-
-        return explore
-    raise AttributeError(name)

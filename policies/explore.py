@@ -38,20 +38,26 @@ import numpy as np
 from scipy import ndimage
 
 from cablesim.config import to_dict
-from cablesim.errors import InputError
+from cablesim.episode import primitives as prim
+from cablesim.errors import InputError, PhysicsDivergedError, SceneError
 from cablesim.evaluation import scores_dict
+from cablesim.formats.mcor import write_mcor, write_multigrasp
+from cablesim.frames import Intrinsics, Stream
 from cablesim.jsonutil import jsonable
-from cablesim.perception.correlation import CorrelationParams
+from cablesim.perception.correlation import AblationParams, CorrelationParams
 from cablesim.perception.flow import make_flow
-from cablesim.perception.frames import Intrinsics, Stream
 from cablesim.perception.geometry import eccentricity, segment_pose
 from cablesim.perception.grasp_sampler import GraspSampler
 from cablesim.perception.pipeline import StreamSegmentation, segment_stream
+from cablesim.perception.raft import check_checkpoint_file
 from cablesim.progress import Progress, Say, quiet
+from cablesim.recording import RecordingWriter
 from cablesim.seeding import stream
+from cablesim.sim.session import SimSession
 
 from .config import ExploreConfig
 from .merge import VoteMerger, dis_target_flow
+from .report import ExplorationWriter
 
 
 @dataclass
@@ -203,7 +209,6 @@ class ExplorationResult:
 def grasp_reachability(robot: Any, T_world_camera: np.ndarray, cfg: Any) -> Callable:
     """The sampler's reachability callback: :func:`~cablesim.episode.primitives.check_interaction`
     on the grasp built from a camera-frame (centre, axis) of a proposal."""
-    from cablesim.episode import primitives as prim
 
     T = np.asarray(T_world_camera, float)
 
@@ -407,7 +412,6 @@ class Exploration:
         """One interaction on the current segment, recorded as it happens when asked."""
         if self.record_to is None:
             return self.session.interact(self.segment, self.interaction_cfg, say=self.say)
-        from cablesim.recording import RecordingWriter
 
         meta = {"interaction_index": k, "source": self.source, "seed": self.session.cfg.seed}
         writer = RecordingWriter(self.record_to / f"interaction{k}", meta=meta)
@@ -426,7 +430,6 @@ class Exploration:
     def _write_published(self, k: int, stream: Stream) -> None:
         """The interaction again in the published motion-correlation layout (SPEC 8), with the
         exploration's sequences listed as one multi-grasp group."""
-        from cablesim.formats.mcor import write_mcor, write_multigrasp
 
         assert self.record_to is not None
         masks = [f.arm_mask for f in stream.frames]
@@ -520,8 +523,6 @@ def _method_params(cfg: ExploreConfig) -> Any:
     if method == "segmentation":
         return cfg.segmentation
     if method == "ablation":
-        from cablesim.perception.correlation import AblationParams
-
         return AblationParams()
     if method == "correlation":
         return cfg.correlation
@@ -538,15 +539,9 @@ def explore(
     """Run one simulated exploration (see the module docstring); with ``out`` write pictures, a
     video and ``metrics.json`` there (:mod:`cablesim.policies.report`); with ``record_to``
     record every interaction's stream there."""
-    from cablesim.errors import PhysicsDivergedError, SceneError
-    from cablesim.sim.session import SimSession
-
-    from .report import ExplorationWriter
 
     cfg = config or ExploreConfig()
     if cfg.flow == "raft":  # the checkpoint is checked before the scene is built
-        from cablesim.perception.raft import check_checkpoint_file
-
         check_checkpoint_file((flow_kwargs or {}).get("checkpoint"))
     say = progress or Progress("explore", cfg.progress)
     t_start = time.perf_counter()

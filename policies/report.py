@@ -30,8 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.frames import Stream
 from cablesim.jsonutil import json_default
-from cablesim.perception.frames import Stream
 from cablesim.video import VideoWriter, count_video_frames
 from cablesim.viz import (
     SEGMENT_COLOUR,

@@ -22,10 +22,10 @@ cablesim.gl.configure()  # the headless GL back end, before MuJoCo is imported
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from cablesim.frames import LABEL_ROBOT  # noqa: E402
 from cablesim.panda.description import FORWARD_QPOS, HOME_QPOS  # noqa: E402
 from cablesim.panda.model import joint_qpos_addresses  # noqa: E402
 from cablesim.panda.visuals import HIDDEN_COLLISION_GROUP  # noqa: E402
-from cablesim.perception.frames import LABEL_ROBOT  # noqa: E402
 from cablesim.sim.camera import SimCamera  # noqa: E402
 from cablesim.sim.config import SceneConfig  # noqa: E402
 from cablesim.sim.world import World  # noqa: E402

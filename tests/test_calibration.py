@@ -28,7 +28,7 @@ from cablesim.calibration import (
 )
 from cablesim.cli import main
 from cablesim.errors import CalibrationError, ConfigError
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 from cablesim.seeding import stream
 
 K = Intrinsics(640.0, 600.0, 318.0, 242.0, 640, 480)

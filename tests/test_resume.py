@@ -481,7 +481,7 @@ def _noise_stream(n: int):
 
 
 def test_a_full_disk_keeps_a_recording_of_the_frames_before(small_disk):
-    from cablesim.perception.frames import Stream
+    from cablesim.frames import Stream
     from cablesim.recording import Recording, RecordingWriter
 
     disk, how = small_disk(1_000_000, 1_000_000)

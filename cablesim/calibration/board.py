@@ -16,7 +16,7 @@ import numpy as np
 
 from cablesim.calibration.transforms import make_transform, rodrigues
 from cablesim.errors import CalibrationError, ConfigError, InputError
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 
 MIN_CORNERS = 8  # detected ChArUco corners for a usable view
 

@@ -21,6 +21,7 @@ from cablesim.calibration.plan import PlanConfig, PlannedPose, Say, as_pose, pla
 from cablesim.calibration.solve import CalibrationResult, Sample, calibrate
 from cablesim.errors import ConfigError
 from cablesim.panda.description import RETRACT_QPOS
+from cablesim.robot.grasping import move_joints_safely
 
 if TYPE_CHECKING:  # pragma: no cover
     from cablesim.camera.base import Camera
@@ -148,9 +149,6 @@ def calibrate_devices(
         )
     finally:
         if return_home:
-            # imported here: cablesim.robot.grasping loads MuJoCo (through robot.pose)
-            from cablesim.robot.grasping import move_joints_safely
-
             res = move_joints_safely(robot, start)
             reached = [e["index"] for e in session.log if e["moved"]]
             if not res and reached:  # back through the first view reached, then home

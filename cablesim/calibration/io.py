@@ -26,8 +26,8 @@ import numpy as np
 from cablesim.calibration.board import BoardSpec
 from cablesim.calibration.transforms import check_transform, invert, pose_difference
 from cablesim.errors import CalibrationError, ConfigError, InputError
+from cablesim.frames import Intrinsics
 from cablesim.jsonutil import json_default
-from cablesim.perception.frames import Intrinsics
 
 if TYPE_CHECKING:  # pragma: no cover
     from cablesim.calibration.solve import CalibrationResult

@@ -19,6 +19,7 @@ from cablesim.calibration.board import BoardSpec
 from cablesim.calibration.solve import MIN_POSES
 from cablesim.calibration.transforms import invert, make_transform, pose_difference, rodrigues
 from cablesim.errors import CalibrationError, ConfigError
+from cablesim.pose import Pose
 
 if TYPE_CHECKING:  # pragma: no cover
     from cablesim.robot.base import Robot
@@ -152,12 +153,8 @@ def _ordered(poses: list[PlannedPose]) -> list[PlannedPose]:
     return tour
 
 
-def as_pose(T: np.ndarray):
-    """A 4x4 transform as the robot's :class:`~cablesim.robot.pose.Pose`."""
-    # imported here: cablesim.robot.pose loads MuJoCo (its quaternion helpers), and the
-    # calibration stays importable without it (tests/test_calibration.py checks)
-    from cablesim.robot.pose import Pose
-
+def as_pose(T: np.ndarray) -> Pose:
+    """A 4x4 transform as the robot's :class:`~cablesim.pose.Pose`."""
     return Pose.from_matrix(T)
 
 

@@ -26,6 +26,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from scipy.optimize import least_squares
 
 from cablesim.calibration.board import BoardDetection, BoardSpec, project_points, rms_distance
 from cablesim.calibration.io import FORMAT, VERSION
@@ -39,7 +40,7 @@ from cablesim.calibration.transforms import (
     rotation_log,
 )
 from cablesim.errors import CalibrationError
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 
 MIN_POSES = 5  # usable views for a calibration
 
@@ -114,7 +115,6 @@ def refine_eye_to_hand(
 ) -> tuple[np.ndarray, np.ndarray]:
     """X and Y adjusted together to minimise the reprojection error of every corner of every
     view through ``X^-1 B_i Y`` (Huber loss, 1 px)."""
-    from scipy.optimize import least_squares
 
     K = intrinsics.K
     Bs = [np.asarray(b, float) for b in T_world_tcp]

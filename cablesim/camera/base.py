@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception.frames import Intrinsics, validate_rgbd
+from cablesim.frames import Intrinsics, validate_rgbd
 
 
 @dataclass(frozen=True)

@@ -25,12 +25,12 @@ import numpy as np
 
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.errors import InputError, RecordingError
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 
 
 def _rs():
     try:
-        import pyrealsense2 as rs
+        import pyrealsense2 as rs  # lazy: optional heavy package
     except ImportError as e:  # pragma: no cover - depends on the machine
         raise ImportError(
             "RealSenseCamera needs pyrealsense2: pip install 'cablesim[real]' "

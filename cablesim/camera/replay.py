@@ -16,7 +16,7 @@ import numpy as np
 
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.errors import RecordingError
-from cablesim.perception.frames import Frame, Intrinsics, Stream
+from cablesim.frames import Frame, Intrinsics, Stream
 from cablesim.recording import Recording
 
 

@@ -21,7 +21,8 @@ from typing import Any, TypeVar
 
 from cablesim.config import ConfigMigrationWarning, flatten, parse_value, replace_paths
 from cablesim.errors import ConfigError, InputError
-from cablesim.panda.visuals import VISUALS
+from cablesim.panda.description import VISUALS
+from cablesim.sim.settle import cache_dir
 
 T = TypeVar("T")
 
@@ -83,7 +84,6 @@ def check_settle_cache(cfg: T, scene: str = "") -> T:
         node = getattr(node, key)
     if not node.physics.cache:
         return cfg
-    from cablesim.sim.settle import cache_dir
 
     where = cache_dir()
     try:

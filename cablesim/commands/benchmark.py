@@ -22,6 +22,8 @@ import argparse
 from pathlib import Path
 
 from cablesim.commands._args import add_config_arguments, build_config, show_config
+from cablesim.jobs import parse_range
+from cablesim.thesis import ThesisConfig, run_thesis
 
 #: the flags that write a field of ThesisConfig as they are
 FLAGS = {
@@ -86,8 +88,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def config_from_args(args: argparse.Namespace):
     """``ThesisConfig()`` or ``--config FILE``, then the flags given, then ``--set``."""
-    from cablesim.jobs import parse_range
-    from cablesim.thesis import ThesisConfig
 
     values: dict[str, object] = {}
     for name in ("validation", "test", "clip_validation", "clip_test"):
@@ -112,7 +112,6 @@ def config_from_args(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from cablesim.thesis import run_thesis
 
     cfg = config_from_args(args)
     if args.show_config:

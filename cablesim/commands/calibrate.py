@@ -40,9 +40,21 @@ from cablesim.calibration import (
     pose_difference,
     write_calibration,
 )
+from cablesim.camera.realsense import RealSenseCamera
 from cablesim.errors import CalibrationError, ConfigError, InputError
+from cablesim.panda.ik import Obstacle
+from cablesim.pose import Pose
 from cablesim.progress import Progress, quiet
+from cablesim.robot.franky_panda import FrankyPanda
 from cablesim.seeding import stream
+from cablesim.sim.config import (
+    CameraConfig,
+    EpisodeConfig,
+    HoseConfig,
+    RobotConfig,
+    SceneConfig,
+)
+from cablesim.sim.session import SimSession
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -153,14 +165,6 @@ def _base_matrix(base: list[float] | None) -> np.ndarray | None:
 
 
 def _sim_devices(args: argparse.Namespace) -> tuple[Any, Any, Any, np.ndarray, dict]:
-    from cablesim.sim.config import (
-        CameraConfig,
-        EpisodeConfig,
-        HoseConfig,
-        RobotConfig,
-        SceneConfig,
-    )
-    from cablesim.sim.session import SimSession
 
     scene = SceneConfig(
         seed=args.seed,
@@ -169,16 +173,12 @@ def _sim_devices(args: argparse.Namespace) -> tuple[Any, Any, Any, np.ndarray, d
         robot=RobotConfig(hand_board=True),
     )
     session = SimSession.build(EpisodeConfig(scene=scene))
-    from cablesim.robot.pose import Pose
 
     base = Pose(*session.world.panda_base).matrix()
     return session, session.robot, session.camera, base, {"scene": scene.to_dict()}
 
 
 def _real_devices(args: argparse.Namespace) -> tuple[Any, Any, Any, np.ndarray | None, dict]:
-    from cablesim.camera.realsense import RealSenseCamera
-    from cablesim.panda.ik import Obstacle
-    from cablesim.robot.franky_panda import FrankyPanda
 
     table = Obstacle.box("table", (0.0, 0.0, args.table_z - 0.02), (1.5, 1.5, 0.02))
     obstacles = [] if args.no_table else [table]

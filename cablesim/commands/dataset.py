@@ -23,6 +23,10 @@ import argparse
 import json
 from pathlib import Path
 
+from cablesim.errors import ConfigError
+from cablesim.files import OutputLock, write_text
+from cablesim.jobs import Job, execute, load_results, parse_range
+
 LAYOUTS = ("movingcables", "mcor")
 
 
@@ -48,8 +52,6 @@ def dataset_jobs(
     scene: dict,
     periods: int | None = None,
 ) -> list:
-    from cablesim.errors import ConfigError
-    from cablesim.jobs import Job
 
     if layout == "mcor" and split == "train":
         raise ConfigError("--split", "the motion-correlation annotations have validation and test")
@@ -73,13 +75,9 @@ def dataset_jobs(
 
 
 def run(args: argparse.Namespace) -> int:
-    from cablesim.files import OutputLock, write_text
-    from cablesim.jobs import execute, load_results, parse_range
 
     a, b = parse_range(args.scenes)
     if args.layout == "movingcables" and b - a > 9999:
-        from cablesim.errors import ConfigError
-
         raise ConfigError("--scenes", "a MovingCables split holds at most 9999 clips")
     scene = {"width": args.width, "height": args.height}
     jobs = dataset_jobs(args.layout, a, b, args.out, args.split, scene, args.periods)

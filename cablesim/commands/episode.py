@@ -33,9 +33,10 @@ from cablesim.commands._args import (
     show_config,
     write_config,
 )
-from cablesim.perception.frames import LABEL_ROBOT, Stream
+from cablesim.frames import LABEL_ROBOT, Stream
 from cablesim.recording import RecordingWriter
 from cablesim.sim.config import EpisodeConfig
+from cablesim.sim.session import simulate_episode
 from cablesim.viz import (
     SEGMENT_COLOUR,
     colour_labels,
@@ -85,7 +86,6 @@ def contact_sheet(
 
 
 def run(args: argparse.Namespace) -> int:
-    from cablesim.sim.session import simulate_episode
 
     cfg = config_from_args(args)
     if args.show_config:

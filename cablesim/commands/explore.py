@@ -43,9 +43,15 @@ from cablesim.commands._args import (
 )
 from cablesim.errors import InputError
 from cablesim.perception.flow import FLOW_BACKENDS
+from cablesim.perception.geometry import line_segment_mask
 from cablesim.perception.methods import CURRENT_METHODS
+from cablesim.perception.raft import load_raft
 from cablesim.perception.registry import parse_spec
 from cablesim.policies.config import MERGES, STRATEGIES, ExploreConfig
+from cablesim.policies.explore import Exploration, explore
+from cablesim.policies.report import ExplorationWriter, overlay_mask, write_png
+from cablesim.progress import Progress
+from cablesim.real import RealConfig, RealSession
 from cablesim.robot.guard import SafetyConfig
 
 
@@ -129,7 +135,6 @@ def _flow_kwargs(cfg: ExploreConfig, args: argparse.Namespace) -> dict | None:
         return None
     if args.raft_checkpoint is None:
         raise InputError("--flow raft needs --raft-checkpoint (no weights are downloaded)")
-    from cablesim.perception.raft import load_raft
 
     load_raft(args.raft_checkpoint)  # file, torch and weights checked before anything is built
     return {"checkpoint": args.raft_checkpoint}
@@ -143,7 +148,6 @@ def run(args: argparse.Namespace) -> int:
     args.out = prepare_output_dir(args.out)
     if args.robot != "sim":
         return run_real(args, cfg, flow_kwargs)
-    from cablesim.policies.explore import explore
 
     cfg = check_settle_cache(cfg, "episode.scene")
     write_config(args.out, cfg)
@@ -177,7 +181,6 @@ def _floats(text: str, n: int, name: str) -> list[float]:
 
 def start_segment(args: argparse.Namespace, image) -> np.ndarray:
     """The start segment in ``image``: a mask file, or a point and an angle."""
-    from cablesim.perception.geometry import line_segment_mask
 
     h, w = image.depth.shape
     if args.start is not None:
@@ -201,7 +204,6 @@ def start_segment(args: argparse.Namespace, image) -> np.ndarray:
 
 
 def real_config(args: argparse.Namespace, cfg: ExploreConfig):
-    from cablesim.real import RealConfig
 
     if not args.robot_host:
         raise InputError("--robot franky needs --robot-host")
@@ -224,10 +226,6 @@ def real_config(args: argparse.Namespace, cfg: ExploreConfig):
 
 
 def run_real(args: argparse.Namespace, cfg: ExploreConfig, flow_kwargs: dict | None) -> int:
-    from cablesim.policies.explore import Exploration
-    from cablesim.policies.report import ExplorationWriter
-    from cablesim.progress import Progress
-    from cablesim.real import RealSession
 
     real = real_config(args, cfg)
     out: Path = args.out
@@ -268,7 +266,6 @@ def run_real(args: argparse.Namespace, cfg: ExploreConfig, flow_kwargs: dict | N
 
 def dry_run(session, start, mask: np.ndarray, out: Path) -> int:
     """Plan the first interaction on the virtual robot; write plan.json and plan.png."""
-    from cablesim.policies.report import overlay_mask, write_png
 
     result = session.interact(mask)
     log = session.robot.log

@@ -32,8 +32,12 @@ from cablesim.commands._args import (
 )
 from cablesim.config import to_dict
 from cablesim.errors import InputError
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT
+from cablesim.sim.camera import SimCamera
 from cablesim.sim.config import BACKGROUNDS, SceneConfig
+from cablesim.sim.flow_gt import gt_flow
+from cablesim.sim.settle import settle_world
+from cablesim.sim.world import World
 from cablesim.viz import (
     colour_flow,
     colour_labels,
@@ -102,10 +106,6 @@ def pull_hose(world, hose_index: int, distance: float, duration: float) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cablesim.sim.camera import SimCamera
-    from cablesim.sim.flow_gt import gt_flow
-    from cablesim.sim.settle import settle_world
-    from cablesim.sim.world import World
 
     cfg = scene_config(args)
     if args.show_config:

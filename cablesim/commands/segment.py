@@ -36,15 +36,20 @@ import numpy as np
 
 from cablesim.commands._args import add_grow_colour_argument
 from cablesim.errors import InputError, RecordingError
+from cablesim.formats import detect_layout
+from cablesim.formats.gripper_log import read_realsense
+from cablesim.formats.mcor import read_annotation, read_mcor
+from cablesim.frames import Stream
 from cablesim.jsonutil import json_default
 from cablesim.perception.flow import FLOW_BACKENDS, check_flow, make_flow
-from cablesim.perception.frames import Stream
+from cablesim.perception.flow_region import FlowRegion
 from cablesim.perception.methods import METHODS, check_method, make_method
 from cablesim.perception.metrics import BETAS, score_mask
 from cablesim.perception.pipeline import params_for_beta, segment_stream
 from cablesim.perception.published import PUBLISHED_THRESHOLDS
 from cablesim.perception.refine import DEFAULT_REFINE, GrowParams, RefineParams
 from cablesim.perception.registry import parse_spec
+from cablesim.recording import read_stream
 from cablesim.viz import colour_map, hstack, label, overlay_votes, write_png
 
 
@@ -97,19 +102,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _read(args: argparse.Namespace) -> tuple[Stream, str, np.ndarray | None]:
     """(stream, layout, given start segment or None)."""
-    from cablesim.formats import detect_layout
 
     layout = detect_layout(args.sequence)
     segment = None
     if layout == "mcor":
-        from cablesim.formats.mcor import read_mcor
-
         ann = None if args.annotations == "none" else args.annotations
         seq = read_mcor(args.sequence, ann)
         stream, segment = seq.stream, seq.segment
     elif layout == "cablesim-recording":
-        from cablesim.recording import read_stream
-
         stream = read_stream(args.sequence)
         px = stream.meta.get("segment_px")
         if px:
@@ -119,7 +119,6 @@ def _read(args: argparse.Namespace) -> tuple[Stream, str, np.ndarray | None]:
     elif layout == "realsense":
         if args.gripper_log is None:
             raise InputError("a RealSense .db3 recording needs --gripper-log")
-        from cablesim.formats.gripper_log import read_realsense
 
         stream = read_realsense(args.sequence, args.gripper_log, args.time_offset)
     else:
@@ -132,8 +131,6 @@ def _read(args: argparse.Namespace) -> tuple[Stream, str, np.ndarray | None]:
 
 def _truth(args: argparse.Namespace, stream: Stream) -> np.ndarray | None:
     if args.truth is not None:
-        from cablesim.formats.mcor import read_annotation
-
         m = read_annotation(args.truth)
         if m.shape != stream.target.shape:
             raise InputError(f"{args.truth}: size {m.shape}, the target is {stream.target.shape}")
@@ -167,7 +164,6 @@ def _flow(args: argparse.Namespace, stream: Stream) -> Any:
 def _region(args: argparse.Namespace) -> Any:
     if args.crop is None and args.scale is None:
         return "auto"
-    from cablesim.perception.flow_region import FlowRegion
 
     crop = args.crop
     return FlowRegion(

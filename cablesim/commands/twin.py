@@ -26,6 +26,11 @@ from cablesim.commands._args import (
     prepare_output_dir,
     show_config,
 )
+from cablesim.progress import Progress, quiet
+from cablesim.sim.config import EpisodeConfig
+from cablesim.twin import FrankaSimServer
+from cablesim.twin.episode import sim_episode, twin_episode
+from cablesim.viz import errors_tile, overlay_votes, panel, write_png
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,11 +43,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from cablesim.progress import Progress, quiet
-    from cablesim.sim.config import EpisodeConfig
-    from cablesim.twin import FrankaSimServer
-    from cablesim.twin.episode import sim_episode, twin_episode
-    from cablesim.viz import errors_tile, overlay_votes, panel, write_png
 
     cfg = build_config(EpisodeConfig, args, EPISODE_FLAGS)
     if args.show_config:

@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError, RecordingError
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT, Frame
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT, Frame
 from cablesim.recording import FORMAT, Recording
 from cablesim.viz import LABEL_COLOURS, ROBOT_COLOUR
 
@@ -115,7 +115,7 @@ def write_rrd(
     src: Source, out: Path, stride: int = 1, jpeg_quality: int = 90, say=print
 ) -> dict[str, Any]:
     """Write everything found in ``src`` to ``out``; returns counts of what was logged."""
-    import rerun as rr
+    import rerun as rr  # lazy: optional heavy package
 
     if stride < 1:
         raise InputError(f"--stride must be at least 1, got {stride}")
@@ -318,7 +318,7 @@ def spawn_viewer(rrd: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        import rerun  # noqa: F401
+        import rerun  # noqa: F401  # lazy: optional heavy package
     except ImportError as e:
         raise InputError(
             "cablesim view needs rerun-sdk: pip install -e '.[viewer]' (or '.[dev]')"

@@ -30,9 +30,15 @@ from typing import Any
 import cv2
 import numpy as np
 
+from cablesim.dataset.randomize import Randomization, randomize_scene
 from cablesim.errors import CablesimError, InputError
 from cablesim.files import commit, staged
-from cablesim.sim.config import SceneConfig
+from cablesim.formats.mcor import sequence_name, write_annotation, write_mcor
+from cablesim.formats.movingcables import ClipFrame, labels_to_instances, write_clip
+from cablesim.sim.config import EpisodeConfig, SceneConfig
+from cablesim.sim.flow_gt import gt_flow
+from cablesim.sim.freeze import HoseFreeze
+from cablesim.sim.session import SimSession
 
 STICK_DILATION = 2  # px, as the thesis dilates the poking stick's mask
 SEQUENCE_EPOCH = dt.datetime(2030, 1, 1)  # sequence names: epoch + seed minutes
@@ -49,7 +55,6 @@ def outcome_of(reason: str) -> str:
 def scene_from(params: dict[str, Any]) -> SceneConfig:
     """The scene of a job: randomised from the seed (datasets) or the default scene, at the
     job's image size and hose count."""
-    from cablesim.dataset.randomize import Randomization, randomize_scene
 
     size = params.get("scene", {})
     values: dict[str, Any] = {"seed": int(params["seed"])}
@@ -95,11 +100,6 @@ def simulate_clip(
     directions: tuple[str, ...] = ("along",),
 ) -> SimClip | dict[str, Any]:
     """A :class:`SimClip` of ``scene``, or a failure record (named outcome)."""
-    from cablesim.formats.movingcables import labels_to_instances
-    from cablesim.sim.config import EpisodeConfig
-    from cablesim.sim.flow_gt import gt_flow
-    from cablesim.sim.freeze import HoseFreeze
-    from cablesim.sim.session import SimSession
 
     cfg = EpisodeConfig(scene=scene.replace(seed=seed)).with_values(
         {
@@ -154,7 +154,6 @@ CLIP_FOLDERS = ("rgb_clips", "flow_first_back", "normal_flow_first_back", "stick
 def write_sim_clip(split_dir: str | Path, name: str, clip: SimClip) -> int:
     """Write a clip in the published layout (staged, then moved into place, replacing an
     unfinished earlier one: module docstring); returns the bytes written."""
-    from cablesim.formats.movingcables import ClipFrame, write_clip
 
     frames = [
         ClipFrame(2 * k + 1, rgb, flow, nflow, inst, stick)
@@ -215,7 +214,6 @@ def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
 def sequence_name_of(seed: int) -> str:
     """The published-style folder name of seed ``seed``'s sequence (a fixed epoch plus
     ``seed`` minutes, so names sort by seed and never depend on when they were made)."""
-    from cablesim.formats.mcor import sequence_name
 
     return sequence_name(SEQUENCE_EPOCH + dt.timedelta(minutes=int(seed)))
 
@@ -223,9 +221,6 @@ def sequence_name_of(seed: int) -> str:
 def run_mcor(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     """Job: one motion-correlation sequence (params: seed, split, root, scene, periods,
     arm_masks)."""
-    from cablesim.formats.mcor import write_annotation, write_mcor
-    from cablesim.sim.config import EpisodeConfig
-    from cablesim.sim.session import SimSession
 
     t0 = time.perf_counter()
     seed = int(params["seed"])

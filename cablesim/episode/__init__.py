@@ -18,6 +18,7 @@ from cablesim.episode.config import (
     InteractionConfig,
     RetreatConfig,
 )
+from cablesim.episode.runner import run_interaction
 
 __all__ = [
     "ActionConfig",
@@ -27,11 +28,3 @@ __all__ = [
     "RetreatConfig",
     "run_interaction",
 ]
-
-
-def __getattr__(name: str):  # lazy: the runner imports the robot interface (MuJoCo poses)
-    if name == "run_interaction":
-        from cablesim.episode.runner import run_interaction
-
-        return run_interaction
-    raise AttributeError(name)

@@ -28,8 +28,8 @@ import numpy as np
 from cablesim.camera.base import CameraImage
 from cablesim.episode.clock import Tick
 from cablesim.episode.truth import FrameSink, TruthProvider
-from cablesim.perception.frames import TARGET_ACTION, Frame
-from cablesim.robot.pose import Pose
+from cablesim.frames import TARGET_ACTION, Frame
+from cablesim.pose import Pose
 
 #: ``(tick) -> HxW bool`` arm mask of the tick's joint state (see the module docstring)
 ArmMaskFunction = Callable[[Tick], np.ndarray]

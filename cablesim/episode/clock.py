@@ -37,8 +37,8 @@ import numpy as np
 
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.errors import InputError
+from cablesim.pose import Pose
 from cablesim.robot.base import Robot
-from cablesim.robot.pose import Pose
 
 
 @dataclass

@@ -31,9 +31,10 @@ import numpy as np
 from cablesim.episode.config import ActionConfig, GraspConfig, InteractionConfig, RetreatConfig
 from cablesim.outcomes import Outcome
 from cablesim.panda.description import RETRACT_QPOS
+from cablesim.pose import Pose, grasp_pose
 from cablesim.robot.base import MoveResult, Robot
+from cablesim.robot.dry_run import DryRunRobot
 from cablesim.robot.grasping import avoiding_hoses, move_joints_safely
-from cablesim.robot.pose import Pose, grasp_pose
 
 #: The default approach: the hand points at the board (world +x); the board normal is -x.
 DEFAULT_APPROACH = (1.0, 0.0, 0.0)
@@ -176,7 +177,6 @@ def plan_interaction(
     reachable while the line to it from the grasp configuration is not (measured: "IK did not
     converge at 100% of the line" on the first stroke).  Robots without an arm model get
     :func:`check_interaction`."""
-    from cablesim.robot.dry_run import DryRunRobot
 
     ok, why = check_interaction(robot, centre, axis, cfg, T_world_camera, approach)
     if not ok or not hasattr(robot, "arm"):

@@ -52,13 +52,13 @@ from cablesim.episode.clock import Clock, Tick
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.truth import FrameSink, TruthProvider
 from cablesim.errors import InputError
+from cablesim.frames import LABEL_ROBOT, Stream
 from cablesim.jsonutil import jsonable
 from cablesim.outcomes import OUTCOMES, Outcome
-from cablesim.perception.frames import LABEL_ROBOT, Stream
 from cablesim.perception.geometry import segment_pose
+from cablesim.pose import Pose
 from cablesim.progress import Say, quiet
 from cablesim.robot.base import Robot
-from cablesim.robot.pose import Pose
 
 
 @dataclass

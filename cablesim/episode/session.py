@@ -16,6 +16,7 @@ import numpy as np
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.runner import InteractionOptions, InteractionResult, run_interaction
+from cablesim.panda.arm_mask import ArmMasker
 from cablesim.panda.description import PARK_QPOS
 from cablesim.progress import Say
 from cablesim.robot.base import Robot
@@ -86,8 +87,6 @@ class Session:
         margin = interaction.capture.arm_mask_margin
         key = (id(self.robot), id(self.camera), margin)
         if getattr(self, "_arm_masker_key", None) != key:
-            from cablesim.panda.arm_mask import ArmMasker
-
             self._arm_masker = ArmMasker.for_robot(self.robot, self.camera, margin)
             self._arm_masker_key = key
         return self._arm_masker.for_tick

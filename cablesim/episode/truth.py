@@ -18,8 +18,8 @@ import numpy as np
 
 from cablesim.camera.base import CameraImage
 from cablesim.episode.clock import Tick
-from cablesim.perception.frames import Frame, FrameTruth
-from cablesim.robot.pose import Pose
+from cablesim.frames import Frame, FrameTruth
+from cablesim.pose import Pose
 
 HosePointProbe = Callable[[], np.ndarray]
 

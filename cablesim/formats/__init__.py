@@ -8,7 +8,7 @@
 - cablesim's own recordings are :mod:`cablesim.recording`.
 
 ``detect_layout(path)`` names the layout of a path and ``read_any(path)`` reads any
-interaction layout as a :class:`~cablesim.perception.frames.Stream`.  NumPy/OpenCV only: this
+interaction layout as a :class:`~cablesim.frames.Stream`.  NumPy/OpenCV only: this
 package never imports the simulator.
 """
 
@@ -19,15 +19,17 @@ import os
 from pathlib import Path
 
 from cablesim.errors import RecordingError
-from cablesim.perception.frames import Stream
+from cablesim.formats.gripper_log import read_realsense
+from cablesim.formats.mcor import read_mcor
+from cablesim.formats.movingcables import RGB_FOLDERS
+from cablesim.frames import Stream
+from cablesim.recording import FORMAT, read_stream
 
 LAYOUTS = ("cablesim-recording", "mcor", "movingcables", "realsense")
 
 
 def detect_layout(path: str | os.PathLike[str]) -> str:
     """``cablesim-recording``, ``mcor``, ``movingcables`` or ``realsense`` (a ``.db3`` file)."""
-    from cablesim.formats.movingcables import RGB_FOLDERS
-    from cablesim.recording import FORMAT
 
     p = Path(path)
     if p.is_file():
@@ -63,17 +65,12 @@ def read_any(
     ``gripper_log``; MovingCables clips have no gripper and are not interaction streams)."""
     layout = detect_layout(path)
     if layout == "cablesim-recording":
-        from cablesim.recording import read_stream
-
         return read_stream(path)
     if layout == "mcor":
-        from cablesim.formats.mcor import read_mcor
-
         return read_mcor(path, annotations).stream
     if layout == "realsense":
         if gripper_log is None:
             raise RecordingError(f"{path}: a RealSense recording needs its gripper log")
-        from cablesim.formats.gripper_log import read_realsense
 
         return read_realsense(path, gripper_log, time_offset)
     raise RecordingError(

@@ -34,8 +34,9 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.camera.realsense import RealSenseCamera
 from cablesim.errors import InputError, RecordingError
-from cablesim.perception.frames import TARGET_ACTION, Frame, Stream
+from cablesim.frames import TARGET_ACTION, Frame, Stream
 
 FORMAT = "cablesim-gripper-log"
 VERSION = 1
@@ -152,7 +153,6 @@ def read_realsense(
     max_gap: float = 0.1,
 ) -> Stream:
     """A RealSense ``.db3`` recording and its gripper log as a :class:`Stream`."""
-    from cablesim.camera.realsense import RealSenseCamera
 
     log = read_gripper_log(gripper_log)
     log.t = log.t + float(time_offset)

@@ -49,10 +49,10 @@ from typing import Any
 import cv2
 import numpy as np
 
+from cablesim.checks import as_mask
 from cablesim.errors import InputError, RecordingError
 from cablesim.files import write_image, write_text
-from cablesim.perception._checks import as_mask
-from cablesim.perception.frames import (
+from cablesim.frames import (
     LABEL_BACKGROUND,
     TARGET_ACTION,
     Frame,

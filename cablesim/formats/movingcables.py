@@ -31,9 +31,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from cablesim.checks import as_flow, as_mask
 from cablesim.errors import InputError, RecordingError
 from cablesim.files import write_image
-from cablesim.perception._checks import as_flow, as_mask
 from cablesim.perception.flow import FlowEstimator, make_flow
 from cablesim.perception.metrics import (
     FlowFrameStats,

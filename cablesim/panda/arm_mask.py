@@ -40,10 +40,10 @@ import mujoco
 import numpy as np
 
 from cablesim.errors import InputError
+from cablesim.frames import Intrinsics
 from cablesim.panda.description import FINGER_RANGE
 from cablesim.panda.model import attach_panda, joint_qpos_addresses, robot_body_ids
-from cablesim.perception.frames import Intrinsics
-from cablesim.robot.pose import Pose
+from cablesim.pose import Pose
 
 PREFIX = "mask/"
 NEAR = 0.02  # m, near clipping plane of the mask camera

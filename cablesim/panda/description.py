@@ -21,6 +21,8 @@ import math
 
 import numpy as np
 
+from cablesim.errors import ConfigError
+
 ARM_JOINTS: tuple[str, ...] = tuple(f"joint{i}" for i in range(1, 8))
 FINGER_JOINTS: tuple[str, str] = ("finger_joint1", "finger_joint2")
 
@@ -69,3 +71,14 @@ def _flange_t_tcp() -> np.ndarray:
 #: The Franka Hand's TCP (between the finger pads) in the flange frame: what Desk sets as
 #: ``F_T_NE`` when the hand is configured, and the simulated model's ``grasp_site``.
 FLANGE_T_TCP: np.ndarray = _flange_t_tcp()
+
+
+# the arm's looks: the vendored meshes or MuJoCo primitives (cablesim.panda.visuals adds them)
+VISUALS = ("mesh", "primitive")
+
+
+def check_visual(visual: str, field: str = "robot.visual") -> str:
+    """``visual`` if it names one of :data:`VISUALS`, else ``ConfigError``."""
+    if visual not in VISUALS:
+        raise ConfigError(field, f"unknown visual {visual!r}; choose one of {VISUALS}")
+    return visual

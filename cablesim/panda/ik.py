@@ -18,7 +18,7 @@ import numpy as np
 
 from cablesim.panda.description import FORWARD_QPOS, HOME_QPOS, JOINT_LIMITS, MAX_OPENING
 from cablesim.panda.model import PandaNames, attach_panda, joint_qpos_addresses, robot_body_ids
-from cablesim.robot.pose import Pose
+from cablesim.pose import Pose
 
 _Q_LO, _Q_HI = np.asarray(JOINT_LIMITS, dtype=float).T  # arm joint limits, for clipping
 _HOSE_BIT = 4  # contype of the hose capsules; only the arm links have it in their conaffinity

@@ -21,15 +21,12 @@ from __future__ import annotations
 
 import json
 from functools import cache
-from typing import TYPE_CHECKING
+
+import mujoco
 
 from cablesim.assets import path as asset_path
-from cablesim.errors import ConfigError
+from cablesim.panda.description import VISUALS, check_visual  # noqa: F401 (re-exported)
 
-if TYPE_CHECKING:  # MuJoCo is imported only when meshes are added (config code imports VISUALS)
-    import mujoco
-
-VISUALS = ("mesh", "primitive")
 VISUAL_GROUP = 2
 HIDDEN_COLLISION_GROUP = 3
 MESH_DIR = "panda"
@@ -45,12 +42,6 @@ _MATERIALS: dict[str, tuple[tuple[float, float, float, float], float, float]] = 
 }
 
 
-def check_visual(visual: str, field: str = "robot.visual") -> str:
-    if visual not in VISUALS:
-        raise ConfigError(field, f"unknown visual {visual!r}; choose one of {VISUALS}")
-    return visual
-
-
 @cache
 def mesh_parts() -> tuple[dict, ...]:
     """The vendored parts: ``{"file", "link", "colour", "faces"}`` per mesh."""
@@ -61,7 +52,6 @@ def mesh_parts() -> tuple[dict, ...]:
 def add_mesh_visuals(spec: mujoco.MjSpec, prefix: str = "") -> None:
     """Add the visual meshes to the Panda in ``spec`` (bodies ``{prefix}link0..7``, ``hand``,
     ``left_finger``, ``right_finger``) and hide its primitive geoms (see the module doc)."""
-    import mujoco
 
     p = prefix
     bodies = [f"{p}link{i}" for i in range(8)] + [f"{p}hand", f"{p}left_finger", f"{p}right_finger"]

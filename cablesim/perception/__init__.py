@@ -16,6 +16,15 @@ are plug-ins: the built-ins are registered in :data:`FLOW_BACKENDS` and
 asked for (``docs/plugins.md``).
 """
 
+from cablesim.frames import (
+    LABEL_BACKGROUND,
+    LABEL_ROBOT,
+    TARGET_ACTION,
+    Frame,
+    FrameTruth,
+    Intrinsics,
+    Stream,
+)
 from cablesim.perception.actions import (
     action_direction,
     gripper_displacements,
@@ -41,15 +50,6 @@ from cablesim.perception.flow import (
     texture_mask,
 )
 from cablesim.perception.flow_region import FlowRegion, RegionFlow
-from cablesim.perception.frames import (
-    LABEL_BACKGROUND,
-    LABEL_ROBOT,
-    TARGET_ACTION,
-    Frame,
-    FrameTruth,
-    Intrinsics,
-    Stream,
-)
 from cablesim.perception.geometry import (
     SegmentPose,
     eccentricity,

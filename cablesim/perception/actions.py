@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception.frames import Frame
+from cablesim.frames import Frame
 
 
 def _positions(frames_or_points: Sequence[Frame] | np.ndarray) -> np.ndarray:

@@ -34,8 +34,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from cablesim.errors import InputError
-from cablesim.perception._checks import (
+from cablesim.checks import (
     as_depth,
     as_flow,
     as_real,
@@ -43,6 +42,7 @@ from cablesim.perception._checks import (
     check_positive,
     valid_depth,
 )
+from cablesim.errors import InputError
 
 DepthMode = Literal["gripper", "pixel"]
 

@@ -26,9 +26,9 @@ from typing import Any
 import cv2
 import numpy as np
 
+from cablesim.checks import as_flow, as_image, as_mask, check_params
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_image, check_params
-from cablesim.perception.frames import Frame
+from cablesim.frames import Frame
 from cablesim.perception.registry import Registry
 
 DIS_PRESETS = {
@@ -366,7 +366,6 @@ def flow_names() -> list[str]:
 
 def endpoint_error(flow: np.ndarray, truth: np.ndarray, mask: np.ndarray | None = None) -> float:
     """Mean endpoint error |flow - truth| over ``mask`` (all pixels if None); NaN if empty."""
-    from cablesim.perception._checks import as_flow, as_mask
 
     flow = as_flow(flow, name="flow")
     truth = as_flow(truth, flow.shape[:2], name="truth")

@@ -16,8 +16,8 @@ import cv2
 import numpy as np
 
 from cablesim.errors import InputError
+from cablesim.frames import Frame
 from cablesim.perception.flow import FlowEstimator, OracleFlow
-from cablesim.perception.frames import Frame
 
 
 @dataclass(frozen=True)

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
+from cablesim.checks import as_depth, as_mask, valid_depth
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_depth, as_mask, valid_depth
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 
 
 @dataclass
@@ -138,7 +139,6 @@ def line_segment_mask(
     image x axis (y down), ``length`` metres long at the point's depth (median of the 5x5
     neighbourhood), kept where depth is valid: how a person's click and drag becomes a segment.
     None when there is no depth at the point or fewer than ``min_pixels`` remain."""
-    import cv2
 
     depth = as_depth(depth)
     h, w = depth.shape

@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from cablesim.checks import as_depth, check_params, valid_depth
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_depth, check_params, valid_depth
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 from cablesim.perception.geometry import eccentricity, segment_pose
 from cablesim.perception.skeleton import split_skeleton, thinning
 

@@ -36,12 +36,12 @@ from typing import Any, Protocol
 import numpy as np
 
 from cablesim.errors import InputError
+from cablesim.frames import Frame, Stream
 from cablesim.perception.correlation import (
     AblationParams,
     CorrelationAccumulator,
     CorrelationParams,
 )
-from cablesim.perception.frames import Frame, Stream
 from cablesim.perception.published import (
     PUBLISHED_METHODS,
     PUBLISHED_THRESHOLDS,

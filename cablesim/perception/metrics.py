@@ -20,9 +20,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cablesim.checks import as_flow, as_mask, is_real
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_flow, as_mask, is_real
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT
 
 BETAS: tuple[float, ...] = (1.0, 0.5, 0.4, 0.3, 0.2, 0.1)
 NAN = float("nan")

@@ -1,6 +1,6 @@
 """Stream-level perception: flow for every kept frame, then the per-action methods.
 
-:func:`compute_statistics` runs one pass over a :class:`~cablesim.perception.frames.Stream`:
+:func:`compute_statistics` runs one pass over a :class:`~cablesim.frames.Stream`:
 per action it keeps the samples where the gripper moved >= ``delta_g`` (SPEC 3.5), computes
 d_g = (g_k - g_1) . u_a, estimates the flow of every kept frame to the target frame and feeds
 the running accumulators.  With ``pipelined=True`` the flow runs in a worker thread (stage 1)
@@ -41,11 +41,11 @@ from typing import Any, Literal
 import numpy as np
 
 from cablesim.errors import InputError
+from cablesim.frames import Frame, Stream
 from cablesim.perception.actions import action_direction
 from cablesim.perception.correlation import AblationParams, CorrelationParams
 from cablesim.perception.flow import FlowEstimator, make_flow
 from cablesim.perception.flow_region import FlowRegion, with_region
-from cablesim.perception.frames import Frame, Stream
 from cablesim.perception.methods import (
     CURRENT_METHODS,
     METHODS,

@@ -40,9 +40,9 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.checks import as_flow
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_flow
-from cablesim.perception.frames import Stream
+from cablesim.frames import Stream
 
 # beta -> (R^2 %, |c0| %, segmentation vote share %, flow std in 1e-4 m), as published
 PUBLISHED_THRESHOLDS: dict[float, tuple[int, int, int, int]] = {

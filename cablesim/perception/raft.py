@@ -35,7 +35,7 @@ CHECKPOINT_VERSION = 1
 
 def _torch() -> Any:
     try:
-        import torch
+        import torch  # lazy: optional heavy package
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise InputError("the RAFT back end needs torch: pip install 'cablesim[torch]'") from e
     return torch

@@ -57,14 +57,14 @@ Per mask, after thresholding (``grow``, :class:`GrowParams`; off by default):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import cv2
 import numpy as np
 
+from cablesim.checks import as_flow
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_flow
-from cablesim.perception.frames import Frame, Intrinsics
+from cablesim.frames import Frame, Intrinsics
 
 
 @dataclass(frozen=True)
@@ -165,7 +165,6 @@ class RefineParams:
         )
 
     def describe(self) -> dict:
-        from dataclasses import asdict
 
         return asdict(self)
 

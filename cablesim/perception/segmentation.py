@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from cablesim.checks import as_flow, check_params
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_flow, check_params
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from collections import deque
 import cv2
 import numpy as np
 
-from cablesim.perception._checks import as_mask
+from cablesim.checks import as_mask
 
 
 def thinning(mask: np.ndarray, max_iter: int = 1000) -> np.ndarray:

@@ -8,13 +8,13 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.frames import Frame, Stream
 from cablesim.perception.actions import (
     action_direction,
     gripper_displacements,
     subsample_by_gripper,
 )
 from cablesim.perception.correlation import CorrelationResult
-from cablesim.perception.frames import Frame, Stream
 from cablesim.perception.published import PublishedResult, PublishedSegmentationResult
 from cablesim.perception.refine import GrowParams
 from cablesim.perception.segmentation import SegmentationResult

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from cablesim.perception.frames import (
+from cablesim.frames import (
     LABEL_BACKGROUND,
     TARGET_ACTION,
     Frame,

@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.checks import as_mask
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_mask
 from cablesim.perception.methods import SegmentationMethod, make_method, method_label
 from cablesim.perception.metrics import BETAS, f_beta
 from cablesim.perception.stats import StreamStatistics

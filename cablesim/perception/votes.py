@@ -11,8 +11,8 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from cablesim.checks import as_mask
 from cablesim.errors import InputError
-from cablesim.perception._checks import as_mask
 
 
 def vote_image(masks: Sequence[np.ndarray] | Iterable[np.ndarray]) -> np.ndarray:

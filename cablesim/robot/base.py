@@ -20,7 +20,7 @@ import numpy as np
 
 from cablesim.outcomes import Outcome
 from cablesim.panda.description import HOME_QPOS
-from cablesim.robot.pose import Pose
+from cablesim.pose import Pose
 
 Frame = Literal["world", "camera", "tcp"]
 

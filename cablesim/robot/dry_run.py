@@ -21,8 +21,8 @@ import numpy as np
 
 from cablesim.outcomes import Outcome
 from cablesim.panda.description import MAX_OPENING
+from cablesim.pose import Pose
 from cablesim.robot.base import MoveResult, Robot
-from cablesim.robot.pose import Pose
 
 
 @dataclass

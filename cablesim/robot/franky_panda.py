@@ -48,8 +48,9 @@ from cablesim.errors import ConfigError
 from cablesim.outcomes import Outcome
 from cablesim.panda.description import FLANGE_T_TCP, HAND_OFFSET, MAX_OPENING
 from cablesim.panda.ik import ArmModel, ArmModelChecks, Obstacle
+from cablesim.panda.model import panda_spec
+from cablesim.pose import Pose
 from cablesim.robot.base import Frame, MoveResult, Robot
-from cablesim.robot.pose import Pose
 
 if TYPE_CHECKING:  # pragma: no cover
     import franky
@@ -57,7 +58,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 def _import_franky() -> Any:
     try:
-        import franky
+        import franky  # lazy: optional heavy package
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError(
             "FrankyPanda needs franky-control; install the 'real' extra: "
@@ -481,7 +482,6 @@ def franka_sim_mjcf() -> str:
     gripper model.  Each link's largest geom is named ``link{N}_collision``, which arms the
     server's self-collision reflex (with ``enforce_motion_limits``).  MuJoCo >= 3.2 reads it.
     """
-    from cablesim.panda.model import panda_spec
 
     spec = panda_spec(home_key=False)
     hand = spec.body("hand")

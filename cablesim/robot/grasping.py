@@ -12,8 +12,8 @@ from contextlib import contextmanager
 
 from cablesim.outcomes import Outcome, worst
 from cablesim.panda.description import MAX_OPENING, RETRACT_QPOS
+from cablesim.pose import Pose
 from cablesim.robot.base import MoveResult, Robot
-from cablesim.robot.pose import Pose
 
 
 def pregrasp_pose(grasp: Pose, distance: float) -> Pose:

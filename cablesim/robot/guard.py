@@ -22,8 +22,8 @@ import numpy as np
 from cablesim.config import check_positive
 from cablesim.errors import ConfigError
 from cablesim.outcomes import Outcome
+from cablesim.pose import Pose
 from cablesim.robot.base import Frame, MoveResult, Robot
-from cablesim.robot.pose import Pose
 
 
 @dataclass

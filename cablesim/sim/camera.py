@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import mujoco
@@ -41,8 +40,9 @@ import numpy as np
 
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.errors import InputError
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT, Intrinsics
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT, Intrinsics
 from cablesim.seeding import stream
+from cablesim.sim.sensor import rgb_sensor, stereo_depth
 
 if TYPE_CHECKING:
     from cablesim.sim.world import World
@@ -118,20 +118,6 @@ class SimSnapshot:
     @property
     def shape(self) -> tuple[int, int]:
         return self.labels.shape  # type: ignore[return-value]
-
-    @cached_property
-    def rod(self) -> Any:
-        """Per-snapshot rod segment data for ground-truth flow (computed once)."""
-        from cablesim.sim.flow_gt import RodGeometry
-
-        return RodGeometry.from_snapshot(self)
-
-    @cached_property
-    def flow_source(self) -> Any:
-        """What ground-truth flow *from* this snapshot needs of it alone (computed once)."""
-        from cablesim.sim.flow_gt import SourcePixels
-
-        return SourcePixels.from_snapshot(self)
 
 
 class SimCamera(Camera):
@@ -458,12 +444,8 @@ class SimCamera(Camera):
 
     def _image(self, rgb: np.ndarray, depth: np.ndarray) -> CameraImage:
         if self.rgb_noise:
-            from cablesim.sim.sensor import rgb_sensor
-
             rgb = rgb_sensor(rgb, self._camera_cfg.rgb_sensor, self._rgb_rng)
         if self.depth_noise and self._camera_cfg.depth_model == "stereo":
-            from cablesim.sim.sensor import stereo_depth
-
             depth = stereo_depth(
                 depth, self._camera_cfg.depth_stereo, self._intrinsics.f, self._rng
             )

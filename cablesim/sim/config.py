@@ -30,8 +30,7 @@ from cablesim.config import (
 )
 from cablesim.episode.config import InteractionConfig
 from cablesim.errors import ConfigError
-from cablesim.panda.description import JOINT_LIMITS, PARK_QPOS
-from cablesim.panda.visuals import check_visual
+from cablesim.panda.description import JOINT_LIMITS, PARK_QPOS, check_visual
 
 BACKGROUNDS = ("wood", "bushes", "cables", "solid")
 

@@ -23,14 +23,12 @@ use ``flow_to_target(frame_k, target)`` which is ``gt_flow(target, frame_k)``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from cablesim.errors import InputError
-
-if TYPE_CHECKING:
-    from cablesim.sim.camera import SimSnapshot
+from cablesim.sim.camera import SimSnapshot
 
 DEPTH_TOL_ABS = 0.006  # m: a point is visible in dst if dst depth there is within this ...
 DEPTH_TOL_REL = 0.005  # ... plus this fraction of its depth
@@ -223,7 +221,7 @@ def _check_pair(src: SimSnapshot, dst: SimSnapshot) -> None:
 @dataclass(frozen=True)
 class SourcePixels:
     """What :func:`gt_flow` needs of its *source* snapshot alone, computed once per snapshot
-    (``SimSnapshot.flow_source``): ``flow_to_target`` uses the target frame as the source of
+    (``_flow_source``): ``flow_to_target`` uses the target frame as the source of
     every flow of an interaction, so this work is shared by all of them.
 
     The candidates are the seen pixels that can move: hose pixels and pixels of geoms on a body
@@ -260,7 +258,7 @@ class SourcePixels:
         if len(vv):
             P = K.backproject(np.stack([uu, vv], -1), src.depth[vv, uu])
             X = P @ T[:3, :3].T + T[:3, 3]
-        rs = src.rod
+        rs = _rod(src)
         Xh = X[is_hose]
         edge, tau = rs.nearest_edges(Xh, label[is_hose])
         base = rs.a[edge] + tau[:, None] * (rs.b[edge] - rs.a[edge])
@@ -287,9 +285,24 @@ class SourcePixels:
         )
 
 
+def _rod(snap: SimSnapshot) -> RodGeometry:
+    """Per-snapshot rod segment data for ground-truth flow (computed once, kept on it)."""
+    rod = snap.__dict__.get("_gt_rod")
+    if rod is None:
+        rod = snap.__dict__["_gt_rod"] = RodGeometry.from_snapshot(snap)
+    return rod
+
+
+def _flow_source(snap: SimSnapshot) -> SourcePixels:
+    """What ground-truth flow *from* ``snap`` needs of it alone (computed once, kept on it)."""
+    sp = snap.__dict__.get("_gt_source")
+    if sp is None:
+        sp = snap.__dict__["_gt_source"] = SourcePixels.from_snapshot(snap)
+    return sp
+
+
 def gt_flow(src: SimSnapshot, dst: SimSnapshot) -> GTFlow:
     """Exact flow from ``src`` pixels to ``dst`` (see module docstring)."""
-    from cablesim.sim.camera import SimSnapshot
 
     if not isinstance(src, SimSnapshot) or not isinstance(dst, SimSnapshot):
         raise InputError("gt_flow needs two SimSnapshot objects (from SimCamera.snapshot())")
@@ -298,7 +311,7 @@ def gt_flow(src: SimSnapshot, dst: SimSnapshot) -> GTFlow:
     h, w = src.shape
     flow = np.zeros((h, w, 2), np.float32)
     normal_flow = np.zeros((h, w, 2), np.float32)
-    sp: SourcePixels = src.flow_source
+    sp = _flow_source(src)
 
     # which pixels move: hose pixels, and geom pixels of bodies whose pose changed
     moved_body = np.any(np.abs(src.body_pos - dst.body_pos) > 0, axis=1) | np.any(
@@ -387,7 +400,7 @@ def _carry_hose(
 ) -> np.ndarray:
     """World points in dst of the hose candidates of ``sp`` selected by ``moves``: each point
     keeps its parameter on its edge and its offset from the axis, rotated with the edge."""
-    rs, rd = src.rod, dst.rod
+    rs, rd = _rod(src), _rod(dst)
     edge, tau = sp.edge[moves], sp.tau[moves]
     hoses = np.unique(sp.label[sp.is_hose][moves])
     R = edge_rotations(rs, rd, hoses)[edge]

@@ -17,7 +17,7 @@ import numpy as np
 from cablesim.calibration import BoardSpec
 from cablesim.panda.description import TCP_OFFSET
 from cablesim.panda.model import PandaNames
-from cablesim.robot.pose import mat_to_quat
+from cablesim.pose import mat_to_quat
 
 BACKING_THICKNESS = 0.003  # m
 BACKING_GAP = 0.0005  # m between the printed face and the backing (no z-fighting)

@@ -26,6 +26,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import mujoco
 import numpy as np
 
 from cablesim.sim.config import PerturbConfig
@@ -104,7 +105,6 @@ class NeighbourPerturbation:
     def before_step(self, world: Any) -> None:
         if not self._pulls:
             return
-        import mujoco  # here, so that importing the config does not import MuJoCo
 
         cfg = self.config
         m, d = world.model, world.data

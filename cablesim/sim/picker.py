@@ -48,8 +48,9 @@ from cablesim.camera.base import Camera
 from cablesim.episode import primitives as prim
 from cablesim.episode.config import InteractionConfig
 from cablesim.errors import InputError, NoGraspableSegmentError
-from cablesim.perception.frames import LABEL_ROBOT
+from cablesim.frames import LABEL_ROBOT
 from cablesim.perception.geometry import eccentricity, segment_pose
+from cablesim.pose import grasp_pose
 from cablesim.robot.base import Robot
 
 
@@ -256,7 +257,6 @@ def gripper_obstruction(
     or "".  Checked on the rods (ground truth), each inflated by its radius and ``margin``:
     everything in front of the fingertips' final depth within the fingers' footprint, and
     in front of the hand's within the hand's."""
-    from cablesim.robot.pose import grasp_pose
 
     g = grasp_pose(np.asarray(centre, float), axis, np.asarray(approach, float))
     R = g.rotation

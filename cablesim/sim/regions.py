@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from cablesim.errors import InputError
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 from cablesim.sim.config import SceneConfig
 from cablesim.sim.layout import sample_camera
 from cablesim.sim.world import look_at_frame

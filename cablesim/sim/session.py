@@ -68,10 +68,20 @@ from cablesim.errors import (
     SceneError,
     SceneUnsettledError,
 )
+from cablesim.evaluation import Evaluator
 from cablesim.outcomes import Outcome
 from cablesim.progress import Progress, Say, quiet
+from cablesim.recording import RecordingWriter
 from cablesim.seeding import stream
+from cablesim.sim.camera import SimCamera
+from cablesim.sim.clock import SimClock
 from cablesim.sim.config import EpisodeConfig
+from cablesim.sim.layout import crossed_by, crossing_pairs
+from cablesim.sim.perturb import NeighbourPerturbation
+from cablesim.sim.picker import pick_segment
+from cablesim.sim.sim_panda import SimPanda
+from cablesim.sim.truth import SimTruth
+from cablesim.sim.world import World
 
 
 class SimSession(Session):
@@ -99,11 +109,6 @@ class SimSession(Session):
 
     def _assemble(self, world: Any, camera: Any = None) -> None:
         """Robot, camera, truth, perturbation and clock on ``world`` (reset)."""
-        from cablesim.sim.camera import SimCamera
-        from cablesim.sim.clock import SimClock
-        from cablesim.sim.perturb import NeighbourPerturbation
-        from cablesim.sim.sim_panda import SimPanda
-        from cablesim.sim.truth import SimTruth
 
         world.reset()
         self.world = world
@@ -122,7 +127,6 @@ class SimSession(Session):
     def _guarantee(self) -> None:
         """Draw scenes until one settles and has a qualifying hose of interest (module
         docstring); raises the last draw's named ``SceneError`` after ``max_draws``."""
-        from cablesim.sim.world import World
 
         cfg = self.cfg
         last: SceneError | None = None
@@ -188,7 +192,6 @@ class SimSession(Session):
         interest) in the current image: the stand-in for a person's click.  The segment
         prepared at build is handed out for the hose of interest with the session's own
         interaction config."""
-        from cablesim.sim.picker import pick_segment
 
         if (
             self.start is not None
@@ -204,7 +207,6 @@ class SimSession(Session):
 
     def evaluator(self):
         """Ground truth for scores and grades of the hose of interest (evaluation only)."""
-        from cablesim.evaluation import Evaluator
 
         return Evaluator(self.truth, self.draw_hose())
 
@@ -250,7 +252,6 @@ def simulate_episode(
     docstring), or whose physics diverged while settling, comes back as a failed result with
     its named ``outcome`` (``scene_unsettled``, ``no_graspable_segment``, ``diverged``), not as
     an error."""
-    from cablesim.recording import RecordingWriter
 
     if record_to is not None:  # before the scene is built
         RecordingWriter.check_target(record_to, overwrite)
@@ -320,8 +321,6 @@ def choose_start(
     hoses or more) and shows a graspable segment.  Shared by :class:`SimSession` and the
     digital twin; raises ``NoGraspableSegmentError`` (``where`` names the draw) when no hose
     qualifies."""
-    from cablesim.sim.layout import crossed_by, crossing_pairs
-    from cablesim.sim.picker import pick_segment
 
     n = len(world.hoses)
     if cfg.hose is not None:

@@ -35,8 +35,8 @@ from cablesim.panda.model import (
     robot_body_ids,
     set_grasp_force,
 )
+from cablesim.pose import Pose
 from cablesim.robot.base import MoveResult, Robot
-from cablesim.robot.pose import Pose
 
 #: Velocity feed-forward through the position target: kv / kp of the joint actuators.
 _KV_OVER_KP = 0.1

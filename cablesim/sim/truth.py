@@ -23,8 +23,9 @@ import numpy as np
 from cablesim.camera.base import CameraImage
 from cablesim.episode.clock import Tick
 from cablesim.episode.truth import ActionTruth, FrameSink, HosePointProbe
-from cablesim.perception.frames import Frame, FrameTruth
-from cablesim.robot.pose import Pose
+from cablesim.frames import Frame, FrameTruth
+from cablesim.pose import Pose
+from cablesim.sim.flow_gt import flow_to_target
 
 #: A hose farther than this from the closed hand is not held (simulation check).
 GRASP_MAX_DISTANCE = 0.02
@@ -178,7 +179,6 @@ class SimTruth:
         self, frames: Sequence[Frame], sink: FrameSink | None, say: Callable[[str], None]
     ) -> float:
         """Ground-truth flow from the target (the last frame) to every earlier frame."""
-        from cablesim.sim.flow_gt import flow_to_target
 
         spent = 0.0
         self.kept = list(self._snaps) if self.keep_snapshots else []

@@ -28,9 +28,12 @@ import mujoco
 import numpy as np
 
 from cablesim.errors import PhysicsDivergedError
+from cablesim.panda.model import attach_panda, set_arm
+from cablesim.panda.visuals import add_mesh_visuals_same_view
 from cablesim.seeding import stream
 from cablesim.sim import assets
 from cablesim.sim.config import SceneConfig
+from cablesim.sim.hand_board import add_hand_board
 from cablesim.sim.layout import (
     FEMALE_OVERLAP,
     CameraPose,
@@ -39,6 +42,7 @@ from cablesim.sim.layout import (
     sample_hoses,
     start_shape,
 )
+from cablesim.sim.settle import settle_world
 
 CAMERA_NAME = "rgbd"
 _WARNINGS = (
@@ -288,8 +292,6 @@ class World:
             raise PhysicsDivergedError(f"the scene failed to compile: {e}") from e
         panda = panda_base = None
         if cfg.robot.enabled:
-            from cablesim.panda.model import attach_panda
-
             yaw = cfg.robot.base_yaw
             quat = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
             panda = attach_panda(
@@ -297,14 +299,10 @@ class World:
             )
             panda_base = (np.array(cfg.robot.base_position, float), np.array(quat))
             if cfg.robot.hand_board:
-                from cablesim.sim.hand_board import add_hand_board
-
                 add_hand_board(spec, panda)
         try:
             model = spec.compile()
             if panda is not None and cfg.robot.visual == "mesh":
-                from cablesim.panda.visuals import add_mesh_visuals_same_view
-
                 model = add_mesh_visuals_same_view(spec, model, prefix="panda/")
         except Exception as e:  # pragma: no cover - names the failing part for the user
             raise PhysicsDivergedError(f"the scene failed to compile: {e}") from e
@@ -327,8 +325,6 @@ class World:
         except mujoco.FatalError as e:
             raise PhysicsDivergedError(f"the scene's start state failed: {e}") from e
         if settle:
-            from cablesim.sim.settle import settle_world
-
             settle_world(world)
         return world
 
@@ -336,8 +332,6 @@ class World:
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         if self.panda is not None:
-            from cablesim.panda.model import set_arm
-
             set_arm(m, d, self.panda, self.cfg.robot.park_qpos)
         mujoco.mj_kinematics(m, d)
         for hose in self.hoses:

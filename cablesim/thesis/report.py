@@ -10,6 +10,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import matplotlib
+import matplotlib.pyplot as plt
 import numpy as np
 
 from cablesim.perception.metrics import nanmean
@@ -342,10 +344,8 @@ def plot_pr_curves(
     """Mean precision against mean recall over the test scenes as each method's threshold
     sweeps (correlation: R^2 at the c0 tuned for beta 0.4), union; the thesis's beta 0.4
     points as stars."""
-    import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     keys = sorted(
         {(r["flow"], r["perturb"]) for r in rows if r["n"] == 1}, key=lambda k: (k[0], not k[1])
@@ -416,10 +416,8 @@ def _short(spec: str) -> str:
 def plot_distributions(rows: list[dict[str, Any]], path: Path, beta: float = 0.4) -> Path | None:
     """Per-scene F_beta, precision and recall on the test scenes at the thresholds tuned for
     ``beta`` (union): one box per method and setting."""
-    import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     sel = [r for r in rows if r["n"] == 1 and r["beta"] == beta and "per_scene" in r]
     if not sel:
@@ -450,10 +448,8 @@ def plot_distributions(rows: list[dict[str, Any]], path: Path, beta: float = 0.4
 
 
 def plot_clip_taus(t: dict[str, Any], path: Path) -> Path | None:
-    import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     if not t:
         return None

@@ -23,15 +23,41 @@ import hashlib
 import json
 import math
 import os
+import shutil
 import time
 from pathlib import Path
 from typing import Any
 
+import mujoco
 import numpy as np
 
-from cablesim.dataset.generate import failure, outcome_of, scene_from
+from cablesim.dataset.generate import (
+    clip_name,
+    failure,
+    outcome_of,
+    scene_from,
+    simulate_clip,
+    write_sim_clip,
+)
 from cablesim.errors import CablesimError
 from cablesim.errors import outcome_of as error_outcome
+from cablesim.files import waiting_lock, write_text
+from cablesim.formats.movingcables import STATIC_THRESHOLD, PublishedFarneback, read_clip
+from cablesim.perception.correlation import CorrelationParams
+from cablesim.perception.flow import make_flow
+from cablesim.perception.metrics import movingcables_frame, score_mask
+from cablesim.perception.pipeline import (
+    compute_statistics,
+    masks_from_statistics,
+    params_for_beta,
+)
+from cablesim.perception.tuning import threshold_counts
+from cablesim.perception.votes import merge_votes, vote_image
+from cablesim.policies.config import ExploreConfig
+from cablesim.policies.explore import explore
+from cablesim.recording import read_stream, write_stream
+from cablesim.sim.config import EpisodeConfig, PerturbConfig
+from cablesim.sim.session import SimSession
 from cablesim.thesis.config import METHODS
 
 CODE_DIRS = ("sim", "episode", "panda")  # the code that decides a simulated stream
@@ -43,7 +69,6 @@ def _nan_to_none(v: float) -> float | None:
 
 
 def _scores(pred: np.ndarray, truth: np.ndarray) -> dict[str, float | None]:
-    from cablesim.perception.metrics import score_mask
 
     s = score_mask(pred, truth)
     out = {k: _nan_to_none(v) for k, v in s.to_dict().items()}
@@ -68,7 +93,6 @@ def _code_digest() -> str:
 
 
 def _episode(params: dict[str, Any]) -> Any:
-    from cablesim.sim.config import EpisodeConfig, PerturbConfig
 
     cfg = EpisodeConfig(
         scene=scene_from(params), perturb=PerturbConfig(enabled=bool(params.get("perturb", False)))
@@ -84,9 +108,6 @@ def simulate_stream(params: dict[str, Any], use_cache: bool = True) -> tuple[Any
     entry without one (a killed run) is removed and simulated again.  Two processes that need
     the same entry at once take turns (``flock`` on the entry's ``.lock``): the second finds it
     filled."""
-    import mujoco
-
-    from cablesim.files import waiting_lock
 
     cfg = _episode(params)
     blob = json.dumps([cfg.to_dict(), mujoco.__version__, _code_digest()], sort_keys=True)
@@ -109,7 +130,6 @@ def simulate_stream(params: dict[str, Any], use_cache: bool = True) -> tuple[Any
 
 def _cached(folder: Path) -> tuple[Any, dict[str, Any]] | None:
     """A finished cache entry's (stream, info), or None (missing or damaged)."""
-    from cablesim.recording import read_stream
 
     info_path = folder / "info.json"
     if not info_path.is_file():
@@ -125,7 +145,6 @@ def _cached(folder: Path) -> tuple[Any, dict[str, Any]] | None:
 
 def _simulate(cfg: Any) -> tuple[dict[str, Any], Any]:
     """(info, interaction result or None) of one simulated interaction."""
-    from cablesim.sim.session import SimSession
 
     session = None
     res = None
@@ -161,10 +180,6 @@ def _simulate(cfg: Any) -> tuple[dict[str, Any], Any]:
 def _store(folder: Path, info: dict[str, Any], res: Any) -> None:
     """Write a cache entry: the stream (what an unfinished one left removed first), then
     ``info.json``."""
-    import shutil
-
-    from cablesim.files import write_text
-    from cablesim.recording import write_stream
 
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "info.json").unlink(missing_ok=True)
@@ -178,13 +193,6 @@ def _store(folder: Path, info: dict[str, Any], res: Any) -> None:
 # --------------------------------------------------------------------------- tables 6.4 / 6.5
 def run_interaction(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     """Job: one scene and perturbation setting (module docstring)."""
-    from cablesim.perception.pipeline import (
-        compute_statistics,
-        masks_from_statistics,
-        params_for_beta,
-    )
-    from cablesim.perception.tuning import threshold_counts
-    from cablesim.perception.votes import merge_votes, vote_image
 
     t0 = time.perf_counter()
     stream, info = simulate_stream(params, bool(params.get("cache_streams", True)))
@@ -229,10 +237,6 @@ def run_interaction(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
 # --------------------------------------------------------------------------- tables 6.8 / 6.9
 def run_exploration(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     """Job: an exploration of ``grasps`` grasps on a test scene (module docstring)."""
-    from cablesim.perception.correlation import CorrelationParams
-    from cablesim.policies.config import ExploreConfig
-    from cablesim.policies.explore import explore
-    from cablesim.sim.config import PerturbConfig
 
     t0 = time.perf_counter()
     size = params.get("scene", {})
@@ -284,8 +288,6 @@ def run_exploration(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
 # --------------------------------------------------------------------------- chapter 5
 def clip_flow(name: str) -> Any:
     """The published code's Farneback, or any flow back end's spec."""
-    from cablesim.formats.movingcables import PublishedFarneback
-    from cablesim.perception.flow import make_flow
 
     return PublishedFarneback() if name == "farneback-movingcables" else make_flow(name)
 
@@ -294,9 +296,6 @@ def run_clip(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     """Job: a MovingCables clip (written to ``params["dataset"]/<split>``, numbered by seed
     within its split) and the published evaluation of each flow back end at every motion
     threshold, read back from the written files."""
-    from cablesim.dataset.generate import clip_name, simulate_clip, write_sim_clip
-    from cablesim.formats.movingcables import STATIC_THRESHOLD, read_clip
-    from cablesim.perception.metrics import movingcables_frame
 
     t0 = time.perf_counter()
     seed = int(params["seed"])

@@ -31,15 +31,23 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.episode.clock import StreamClock
+from cablesim.episode.runner import InteractionOptions, run_interaction
 from cablesim.evaluation import scores_dict
+from cablesim.frames import Stream
 from cablesim.jsonutil import jsonable
-from cablesim.perception.frames import Stream
 from cablesim.perception.grasp_sampler import GraspSampler, SamplingResult
 from cablesim.perception.metrics import grade_proposal
 from cablesim.perception.pipeline import StreamSegmentation, segment_stream
+from cablesim.policies.explore import front_segment, grasp_reachability
 from cablesim.progress import Say, quiet
+from cablesim.robot.franky_panda import FrankyPanda
 from cablesim.sim.config import EpisodeConfig
+from cablesim.sim.session import simulate_episode
 from cablesim.twin.franka_sim import HOST
+from cablesim.twin.realsense import SoftwareRealSense
+from cablesim.twin.truth import TwinTruth
+from cablesim.twin.world import FrankySource, TwinWorld
 
 #: FrankyPanda settings against franka-sim: its Cartesian tracking lags a few millimetres, and
 #: there is no realtime kernel here (the real robot keeps the adapter's defaults).
@@ -101,7 +109,6 @@ def perceive(
     """Segment ``stream``, score the mask (votes >= 1) against the target frame's labels of
     ``hose``, and propose the next grasp as exploration does (the first grasp blacklisted, the
     proposal cut to its front-most part in depth), graded against the labels."""
-    from cablesim.policies.explore import front_segment
 
     t0 = time.perf_counter()
     out = Perceived()
@@ -207,13 +214,6 @@ def twin_episode(
     gripper object as wide as the hose.  ``monitor_every`` > 0: ``say`` the twin's
     statistics every so many seconds while it follows.  ``drain``: how long the clock waits
     after an action for the frames the twin rendered of it (the twin may lag)."""
-    from cablesim.episode.clock import StreamClock
-    from cablesim.episode.runner import InteractionOptions, run_interaction
-    from cablesim.policies.explore import grasp_reachability
-    from cablesim.robot.franky_panda import FrankyPanda
-    from cablesim.twin.realsense import SoftwareRealSense
-    from cablesim.twin.truth import TwinTruth
-    from cablesim.twin.world import FrankySource, TwinWorld
 
     cfg = config
     timings: dict[str, float] = {}
@@ -328,8 +328,6 @@ def sim_episode(
     config: EpisodeConfig, method: str = "correlation", flow: str = "dis"
 ) -> tuple[Any, Perceived]:
     """The same seed in pure simulation and the same perception: (SimulatedEpisode, Perceived)."""
-    from cablesim.policies.explore import grasp_reachability
-    from cablesim.sim.session import simulate_episode
 
     ep = simulate_episode(config)
     try:

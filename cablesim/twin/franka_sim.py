@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cablesim.errors import CablesimError, InputError
+from cablesim.robot.franky_panda import franka_sim_mjcf
 
 
 def _loopback_host() -> str:
@@ -363,7 +364,6 @@ class FrankaSimServer:
     def start(self) -> FrankaSimServer:
         """Start the server and wait until it accepts a client; raises
         :class:`FrankaSimUnavailable` when it cannot run here, ``RuntimeError`` when it died."""
-        from cablesim.robot.franky_panda import franka_sim_mjcf
 
         python = server_python()
         if python is None:

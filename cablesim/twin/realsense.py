@@ -28,12 +28,12 @@ import numpy as np
 
 from cablesim.camera.realsense import RealSenseCamera
 from cablesim.errors import InputError
-from cablesim.perception.frames import Intrinsics
+from cablesim.frames import Intrinsics
 
 
 def _rs():
     try:
-        import pyrealsense2 as rs
+        import pyrealsense2 as rs  # lazy: optional heavy package
     except ImportError as e:  # pragma: no cover - depends on the machine
         raise ImportError(
             "the twin's RealSense feed needs pyrealsense2: pip install 'cablesim[real]'"

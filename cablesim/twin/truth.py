@@ -33,8 +33,9 @@ import numpy as np
 from cablesim.camera.base import CameraImage
 from cablesim.episode.clock import Tick
 from cablesim.episode.truth import ActionTruth, FrameSink, HosePointProbe
-from cablesim.perception.frames import Frame, FrameTruth
-from cablesim.robot.pose import Pose
+from cablesim.frames import Frame, FrameTruth
+from cablesim.pose import Pose
+from cablesim.sim.flow_gt import flow_to_target
 from cablesim.sim.truth import GRASP_MAX_DISTANCE, MotionLog
 
 
@@ -208,7 +209,6 @@ class TwinTruth:
         self, frames: Sequence[Frame], sink: FrameSink | None, say: Callable[[str], None]
     ) -> float:
         """Ground-truth flow from the target (the last frame) to every earlier labelled one."""
-        from cablesim.sim.flow_gt import flow_to_target
 
         spent = 0.0
         if not frames or not frames[-1].is_target or len(self._snaps) != len(frames):

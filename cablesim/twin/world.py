@@ -64,10 +64,10 @@ import mujoco
 import numpy as np
 
 from cablesim.errors import InputError
+from cablesim.frames import Intrinsics
 from cablesim.panda.ik import ArmModel, Obstacle, static_obstacles
 from cablesim.panda.model import joint_qpos_addresses, robot_body_ids
-from cablesim.perception.frames import Intrinsics
-from cablesim.robot.pose import Pose
+from cablesim.pose import Pose
 from cablesim.seeding import stream
 from cablesim.sim.camera import SimCamera, intrinsics_from_fovy
 from cablesim.sim.config import EpisodeConfig

@@ -13,7 +13,7 @@ pytest.importorskip(
 from cablesim.camera.base import CameraImage  # noqa: E402
 from cablesim.camera.realsense import RealSenseCamera, write_recording  # noqa: E402
 from cablesim.errors import InputError, RecordingError  # noqa: E402
-from cablesim.perception.frames import Intrinsics  # noqa: E402
+from cablesim.frames import Intrinsics  # noqa: E402
 
 
 def _images(n: int = 4, w: int = 64, h: int = 48) -> list[CameraImage]:

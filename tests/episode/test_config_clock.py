@@ -12,7 +12,7 @@ import pytest
 from cablesim.episode.clock import Tick
 from cablesim.episode.primitives import action_direction, periodic_waypoints
 from cablesim.errors import ConfigError
-from cablesim.robot.pose import Pose
+from cablesim.pose import Pose
 from cablesim.sim.clock import SimClock
 from cablesim.sim.config import EpisodeConfig
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from cablesim.camera.replay import ReplayCamera
+from cablesim.frames import LABEL_ROBOT, Frame, Stream
 from cablesim.perception.actions import subsample_by_gripper
-from cablesim.perception.frames import LABEL_ROBOT, Frame, Stream
 from cablesim.recording import Recording, RecordingWriter
 from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
 from cablesim.sim.session import SimSession, simulate_episode

@@ -11,8 +11,8 @@ import pytest
 
 from cablesim.episode import primitives as prim
 from cablesim.episode.config import RetreatConfig
+from cablesim.frames import LABEL_ROBOT
 from cablesim.panda import PARK_QPOS
-from cablesim.perception.frames import LABEL_ROBOT
 from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
 from cablesim.sim.session import SimSession
 

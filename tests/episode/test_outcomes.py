@@ -29,11 +29,11 @@ from cablesim.errors import (
     SceneError,
     SceneUnsettledError,
 )
+from cablesim.frames import Intrinsics
 from cablesim.outcomes import OUTCOMES, Outcome, outcome_table, worst
 from cablesim.panda.description import HOME_QPOS
-from cablesim.perception.frames import Intrinsics
+from cablesim.pose import Pose
 from cablesim.robot.base import MoveResult, Robot
-from cablesim.robot.pose import Pose
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "outcomes.md"
 W, H = 64, 48

@@ -10,7 +10,7 @@ import pytest
 
 from cablesim.camera.replay import ReplayCamera
 from cablesim.errors import RecordingError
-from cablesim.perception.frames import Stream
+from cablesim.frames import Stream
 from cablesim.perception.synthetic import Region, SyntheticSpec, synthetic_stream
 from cablesim.recording import Recording, RecordingWriter, read_stream, write_stream
 

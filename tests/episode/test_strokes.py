@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from cablesim.episode import primitives as prim
+from cablesim.pose import Pose
 from cablesim.robot.base import MoveResult
-from cablesim.robot.pose import Pose
 
 
 class _Tethered:

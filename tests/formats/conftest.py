@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
+from cablesim.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.perception.synthetic import SyntheticSpec, triangle_wave
 
 H, W, FOCAL, Z = 72, 96, 300.0, 1.0

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from cablesim.formats.movingcables import read_flow_png, write_flow_png
+from cablesim.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.perception import score_mask, segment_stream
 from cablesim.perception.correlation import (
     AblationParams,
@@ -17,7 +18,6 @@ from cablesim.perception.correlation import (
     CorrelationParams,
 )
 from cablesim.perception.flow import DISFlow, FarnebackFlow, GateParams, OracleFlow, texture_mask
-from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.perception.grasp_sampler import GraspSampler, GraspSamplerParams
 from cablesim.perception.metrics import confusion, flow_epe, grade_proposal
 from cablesim.perception.segmentation import SegmentationParams

@@ -7,10 +7,10 @@ import pytest
 
 from cablesim.errors import InputError
 from cablesim.formats.movingcables import write_flow_png
+from cablesim.frames import Frame, Intrinsics, Stream
 from cablesim.perception import score_mask
 from cablesim.perception.correlation import CorrelationParams
 from cablesim.perception.flow import DISFlow, FarnebackFlow
-from cablesim.perception.frames import Frame, Intrinsics, Stream
 from cablesim.perception.grasp_sampler import GraspSampler
 
 K = Intrinsics(100.0, 100.0, 31.5, 23.5, 64, 48)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from cablesim.errors import InputError
+from cablesim.frames import FrameTruth
 from cablesim.perception import (
     FlowRegion,
     Frame,
@@ -18,7 +19,6 @@ from cablesim.perception import (
     compute_statistics,
     segment_stream,
 )
-from cablesim.perception.frames import FrameTruth
 from cablesim.perception.pipeline import masks_from_statistics, params_for_beta
 from cablesim.perception.published import plan_published, quantise
 from cablesim.perception.synthetic import Region, SyntheticSpec, synthetic_stream

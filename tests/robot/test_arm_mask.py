@@ -12,12 +12,12 @@ from cablesim.camera.base import CameraImage
 from cablesim.episode.capture import FrameCollector
 from cablesim.episode.clock import Tick
 from cablesim.errors import InputError
+from cablesim.frames import LABEL_ROBOT, Frame, Intrinsics, Stream
 from cablesim.panda.arm_mask import ArmMasker, arm_mask, dilate
 from cablesim.panda.description import HOME_QPOS
-from cablesim.perception.frames import LABEL_ROBOT, Frame, Intrinsics, Stream
+from cablesim.pose import Pose
 from cablesim.recording import read_stream, write_stream
 from cablesim.robot.grasping import move_joints_safely
-from cablesim.robot.pose import Pose
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:

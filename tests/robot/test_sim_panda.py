@@ -6,8 +6,8 @@ from fixture_world import FixtureWorld
 
 from cablesim.errors import ConfigError
 from cablesim.panda import HOME_QPOS
+from cablesim.pose import Pose, grasp_pose
 from cablesim.robot.grasping import approach_and_grasp
-from cablesim.robot.pose import Pose, grasp_pose
 from cablesim.sim.sim_panda import SimPanda, SimPandaConfig
 
 GRASP_VERTEX = 10

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from cablesim.pose import grasp_pose
 from cablesim.robot.grasping import approach_and_grasp
-from cablesim.robot.pose import grasp_pose
 from cablesim.sim.sim_panda import SimPanda
 
 

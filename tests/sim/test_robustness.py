@@ -19,8 +19,8 @@ from cablesim.errors import (
     UnreachableError,
     outcome_of,
 )
+from cablesim.frames import LABEL_ROBOT
 from cablesim.outcomes import OUTCOMES
-from cablesim.perception.frames import LABEL_ROBOT
 from cablesim.seeding import stream
 from cablesim.sim.config import (
     CameraConfig,

@@ -10,7 +10,7 @@ import pytest
 import cablesim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from cablesim.camera import Camera, CameraImage
 from cablesim.errors import InputError
-from cablesim.perception.frames import LABEL_BACKGROUND, LABEL_ROBOT
+from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT
 from cablesim.sim.camera import SimCamera, intrinsics_from_fovy, robot_body_ids
 from cablesim.sim.config import CameraConfig, RobotConfig, SceneConfig
 from cablesim.sim.world import World

@@ -15,7 +15,7 @@ pytest.importorskip(
 
 from cablesim.camera.realsense import RealSenseCamera  # noqa: E402
 from cablesim.errors import InputError, RecordingError  # noqa: E402
-from cablesim.perception.frames import Intrinsics  # noqa: E402
+from cablesim.frames import Intrinsics  # noqa: E402
 from cablesim.twin.realsense import SoftwareRealSense  # noqa: E402
 
 W, H = 64, 48

@@ -7,7 +7,7 @@ import pytest
 
 from cablesim.errors import InputError
 from cablesim.panda.ik import ArmModel
-from cablesim.robot.pose import Pose
+from cablesim.pose import Pose
 from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneConfig
 from cablesim.twin.world import ReplaySource, TwinWorld
 

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from benchmarks.experiments.realistic_flow.record import CACHE, TAG, Scene
+from cablesim.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.perception.actions import action_direction
 from cablesim.perception.correlation import (
     CorrelationAccumulator,
@@ -34,7 +35,6 @@ from cablesim.perception.correlation import (
 )
 from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow
 from cablesim.perception.flow_region import FlowRegion, RegionFlow
-from cablesim.perception.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.perception.methods import make_method
 from cablesim.perception.metrics import nanmean, score_mask
 from cablesim.perception.pipeline import StreamStatistics, plan_jobs

@@ -1,4 +1,4 @@
-"""Input validation shared by the perception modules; every failure is an ``InputError``."""
+"""Input checks shared by every layer (the ground floor); every failure is an ``InputError``."""
 
 from __future__ import annotations
 

@@ -1,10 +1,15 @@
-"""Rigid poses: position + unit quaternion (w, x, y, z), and a few helpers."""
+"""Rigid poses: position + unit quaternion (w, x, y, z), and a few rotation helpers.
+
+Part of the ground floor every layer may use: pure NumPy, no MuJoCo.  The quaternion <->
+matrix conversions are MuJoCo's ``mju_quat2Mat`` / ``mju_mat2Quat`` written out in NumPy,
+operation for operation, so that they give the same bits.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
-import mujoco
 import numpy as np
 
 
@@ -18,15 +23,45 @@ def _unit_quat(q: np.ndarray) -> np.ndarray:
 
 
 def quat_to_mat(q: np.ndarray) -> np.ndarray:
-    m = np.zeros(9)
-    mujoco.mju_quat2Mat(m, np.asarray(q, dtype=float))
-    return m.reshape(3, 3)
+    """3x3 rotation matrix of the quaternion ``q`` (w, x, y, z; unit length assumed)."""
+    w, x, y, z = (float(v) for v in np.asarray(q, dtype=float).reshape(4))
+    if w == 1.0 and x == 0.0 and y == 0.0 and z == 0.0:
+        return np.eye(3)
+    q00, q01, q02, q03 = w * w, w * x, w * y, w * z
+    q11, q12, q13 = x * x, x * y, x * z
+    q22, q23 = y * y, y * z
+    q33 = z * z
+    return np.array(
+        [
+            [(q00 - q22) + (q11 - q33), 2 * (q12 - q03), 2 * (q13 + q02)],
+            [2 * (q12 + q03), (q00 + q22) - (q11 + q33), 2 * (q23 - q01)],
+            [2 * (q13 - q02), 2 * (q23 + q01), (q00 - q22) + (q33 - q11)],
+        ]
+    )
 
 
 def mat_to_quat(R: np.ndarray) -> np.ndarray:
-    q = np.zeros(4)
-    mujoco.mju_mat2Quat(q, np.asarray(R, dtype=float).reshape(9))
-    return _unit_quat(q)
+    """Unit quaternion (w, x, y, z, w >= 0) of the 3x3 rotation matrix ``R``."""
+    m = [float(v) for v in np.asarray(R, dtype=float).reshape(9)]
+    if m[0] + m[4] + m[8] > 0:
+        w = 0.5 * math.sqrt(1 + m[0] + m[4] + m[8])
+        q = [w, 0.25 * (m[7] - m[5]) / w, 0.25 * (m[2] - m[6]) / w, 0.25 * (m[3] - m[1]) / w]
+    elif m[0] > m[4] and m[0] > m[8]:
+        x = 0.5 * math.sqrt(1 + m[0] - m[4] - m[8])
+        q = [0.25 * (m[7] - m[5]) / x, x, 0.25 * (m[1] + m[3]) / x, 0.25 * (m[2] + m[6]) / x]
+    elif m[4] > m[8]:
+        y = 0.5 * math.sqrt(1 - m[0] + m[4] - m[8])
+        q = [0.25 * (m[2] - m[6]) / y, 0.25 * (m[1] + m[3]) / y, y, 0.25 * (m[5] + m[7]) / y]
+    else:
+        z = 0.5 * math.sqrt(1 - m[0] - m[4] + m[8])
+        q = [0.25 * (m[3] - m[1]) / z, 0.25 * (m[2] + m[6]) / z, 0.25 * (m[5] + m[7]) / z, z]
+    norm = math.sqrt((q[0] * q[0] + q[1] * q[1]) + (q[2] * q[2] + q[3] * q[3]))
+    if norm < 1e-15:
+        q = [1.0, 0.0, 0.0, 0.0]
+    elif abs(norm - 1) > 1e-15:
+        inv = 1 / norm
+        q = [v * inv for v in q]
+    return _unit_quat(np.array(q))
 
 
 @dataclass(frozen=True)
