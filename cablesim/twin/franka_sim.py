@@ -145,23 +145,58 @@ else:
 #: state back until the answer to the last one is applied, for at most one period) holds it
 #: for up to :data:`LOCKSTEP_WAIT` seconds instead: a cycle ends when the client has answered
 #: it, so the robot's time (the state's ``message_id``, which libfranka reads as its clock in
-#: ms) advances one cycle per answered state however late the host runs either process.
+#: ms) advances one cycle per answered state however late the host runs either process.  The
+#: physics follows the same clock: franka-sim steps it in a thread of its own paced to the wall
+#: clock, dropping steps when the host is slow, and when a motion ends it holds the arm where it
+#: measured it, so a host running the physics below real time froze the arm up to 17 mm short of
+#: its target; in lockstep it steps exactly once (1 ms) per state cycle, and the arm's motion is
+#: the same whatever the load.
 #: Nothing else changes: every motion limit is still checked on every command, and a client
 #: that stops answering for longer than the wait still loses cycles (20 in a row abort the
 #: motion with ``communication_constraints_violation``).  Where franka-sim's internals differ,
 #: the server logs that lockstep is unavailable and runs on the wall clock.
 _LOCKSTEP = """
+import threading as _threading, time as _time
 try:
+    import mujoco as _mujoco
     from franka_sim.server.motion_session import MotionSessionMixin as _Session
+    from franka_sim.mujoco_franka_sim import MujocoFrankaSim as _Physics
     _gate = _Session._drain_gate
-except (ImportError, AttributeError) as exc:
+    assert abs(_Physics.__init__.__globals__["DEFAULT_DT"] - 0.001) < 1e-12
+except (ImportError, AttributeError, KeyError, AssertionError) as exc:
     logging.getLogger("cablesim.clock").warning("cablesim-clock: lockstep unavailable (%s)", exc)
 else:
+    _clock_cycles = {{"published": 0, "stepped": 0}}
+    _clock_cv = _threading.Condition()
+
     def _lockstep_gate(self, answer_deadline=0.0):
-        return _gate(self, answer_deadline=answer_deadline + {wait})
+        waited = _gate(self, answer_deadline=answer_deadline + {wait})
+        started = _time.perf_counter()
+        with _clock_cv:  # one physics step (1 ms) per state cycle, however slow the host
+            _clock_cycles["published"] += 1
+            _clock_cv.notify_all()
+            _clock_cv.wait_for(lambda: _clock_cycles["stepped"] >= _clock_cycles["published"], timeout={wait})
+        return waited + (_time.perf_counter() - started)
+
+    def _lockstep_physics(self):
+        logging.getLogger("cablesim.clock").info("cablesim-clock: physics in lockstep")
+        while self.running:
+            with _clock_cv:
+                due = _clock_cv.wait_for(
+                    lambda: _clock_cycles["stepped"] < _clock_cycles["published"] or not self.running, 0.1
+                )
+            if not due or not self.running:
+                continue
+            self._read_and_publish_state()
+            self._apply_control()
+            _mujoco.mj_step(self.model, self.data)
+            with _clock_cv:
+                _clock_cycles["stepped"] += 1
+                _clock_cv.notify_all()
 
     _Session._DRAIN_GATE_TIMEOUT = {wait}
     _Session._drain_gate = _lockstep_gate
+    _Physics.run_simulation = _lockstep_physics
     logging.getLogger("cablesim.clock").info("cablesim-clock: lockstep (wait %.3f s)", {wait})
 """
 
@@ -434,7 +469,9 @@ class FrankaSimServer:
     def running_clock(self) -> str:
         """The clock the server reported it runs on: ``"lockstep"`` or ``"realtime"`` (also
         where lockstep was asked for but franka-sim's internals did not allow it)."""
-        return "lockstep" if "cablesim-clock: lockstep (" in self.log_text() else "realtime"
+        text = self.log_text()
+        lockstep = "cablesim-clock: lockstep (" in text and "physics in lockstep" in text
+        return "lockstep" if lockstep else "realtime"
 
     def stop(self) -> None:
         """Interrupt the server (SIGINT, then SIGKILL after ``stop_timeout``)."""
