@@ -175,7 +175,9 @@ else:
         with _clock_cv:  # one physics step (1 ms) per state cycle, however slow the host
             _clock_cycles["published"] += 1
             _clock_cv.notify_all()
-            _clock_cv.wait_for(lambda: _clock_cycles["stepped"] >= _clock_cycles["published"], timeout={wait})
+            _clock_cv.wait_for(
+                lambda: _clock_cycles["stepped"] >= _clock_cycles["published"], timeout={physics_wait}
+            )
         return waited + (_time.perf_counter() - started)
 
     def _lockstep_physics(self):
@@ -203,6 +205,9 @@ else:
 #: Longest a lockstep server waits for the client's answer to a state (s) before it closes the
 #: cycle as lost; libfranka gives up on a silent robot far later than this.
 LOCKSTEP_WAIT = 0.25
+#: Longest a lockstep server waits for the physics to take the step of a cycle (s): a state
+#: never goes out ahead of the physics unless the physics thread is gone.
+LOCKSTEP_PHYSICS_WAIT = 5.0
 #: The server clocks :class:`FrankaSimServer` offers (``clock``).
 CLOCKS = ("lockstep", "realtime")
 
@@ -429,7 +434,9 @@ class FrankaSimServer:
                 monitor=_MONITOR.format(
                     window=MONITOR_WINDOW, trace=str(self.trace) if self.trace else ""
                 ),
-                clock=_LOCKSTEP.format(wait=LOCKSTEP_WAIT) if self.clock == "lockstep" else "",
+                clock=_LOCKSTEP.format(wait=LOCKSTEP_WAIT, physics_wait=LOCKSTEP_PHYSICS_WAIT)
+                if self.clock == "lockstep"
+                else "",
             )
         )
         self.log = work / "server.log"
