@@ -17,6 +17,7 @@ import pytest
 
 from cablesim.errors import InputError
 from cablesim.robot.franky_panda import FrankyPanda
+from cablesim.twin.episode import FRANKA_SIM_ROBOT
 from cablesim.twin.franka_sim import (
     HOST,
     FrankaSimServer,
@@ -51,18 +52,7 @@ def _session(clock: str, work) -> tuple[list, int, str]:
         pytest.skip(str(e))
     try:
         assert server.running_clock() == clock
-        robot = FrankyPanda(
-            HOST,
-            T_WORLD_CAMERA,
-            T_WORLD_BASE,
-            dynamics_factor=0.2,
-            realtime=False,
-            position_tolerance=0.01,
-            rotation_tolerance=0.05,
-            joint_tolerance=0.02,
-            motion_timeout=15.0,
-            settle_time=10.0,  # the wait ends when reached; a loaded host runs the arm slow
-        )
+        robot = FrankyPanda(HOST, T_WORLD_CAMERA, T_WORLD_BASE, **FRANKA_SIM_ROBOT)
         try:
             home = robot.home(0.5)  # before the stalls
             assert home, home.reason
