@@ -471,6 +471,11 @@ class FrankyPanda(ArmModelChecks, Robot):
 
 
 # ---- the franka-sim server's arm model -------------------------------------------------------
+#: Armature (reflected rotor inertia, kg m^2) of each arm joint in the franka-sim server's model
+#: (see :func:`franka_sim_mjcf`).
+FRANKA_SIM_ARMATURE = 0.5
+
+
 def franka_sim_mjcf() -> str:
     """MJCF of our Panda for the ``franka-sim`` server (its ``$FR3_MJCF``), as an XML string.
 
@@ -509,6 +514,16 @@ def franka_sim_mjcf() -> str:
     for site in link7.sites:
         site.pos = (np.asarray(site.pos) - shift).tolist()
     hand.pos = (np.asarray(hand.pos) - shift).tolist()
+    # franka-sim servoes the arm explicitly (``qfrc_applied = KP e + KD (dq_c - dq)``, KD 200-450
+    # Nm s/rad) at its 1 ms step, which is stable only while dt * max eig(M^-1 KD) < 2.  With
+    # the Menagerie's 0.1 kg m^2 armature that is 3.37 at q2 = 0 (joints 1 and 3 aligned, the
+    # twin's stance) and 1.88 at the ready pose: joints 1 and 3 chatter against each other at
+    # the 87 Nm torque limit, the arm overshoots a finished 10 cm/s stroke and the hold drifts
+    # up to 15 mm off its target (benchmarks/results/franka_sim_timing.md).  At
+    # FRANKA_SIM_ARMATURE it is 0.77 and 0.58: damped without oscillation.
+    for joint in spec.joints:
+        if joint.name.startswith("joint"):
+            joint.armature = FRANKA_SIM_ARMATURE
     # franka-sim's self-collision reflex watches one geom per link, ``link{N}_collision``:
     # give that name to each link's largest geom.
     model = spec.compile()

@@ -147,10 +147,10 @@ else:
 #: it, so the robot's time (the state's ``message_id``, which libfranka reads as its clock in
 #: ms) advances one cycle per answered state however late the host runs either process.  The
 #: physics follows the same clock: franka-sim steps it in a thread of its own paced to the wall
-#: clock, dropping steps when the host is slow, and when a motion ends it holds the arm where it
-#: measured it, so a host running the physics below real time froze the arm up to 17 mm short of
-#: its target; in lockstep it steps exactly once (1 ms) per state cycle, and the arm's motion is
-#: the same whatever the load.
+#: clock, dropping steps when the host is slow, so the states a client saw depended on the
+#: load; in lockstep it steps exactly once (1 ms) per state cycle, and the arm's motion is the
+#: same whatever the load.  (Where a finished motion ends is the servo's stability on the
+#: model, not the clock: see ``FRANKA_SIM_ARMATURE`` in :mod:`cablesim.robot.franky_panda`.)
 #: Nothing else changes: every motion limit is still checked on every command, and a client
 #: that stops answering for longer than the wait still loses cycles (20 in a row abort the
 #: motion with ``communication_constraints_violation``).  Where franka-sim's internals differ,

@@ -77,12 +77,10 @@ def test_in_lockstep_a_stalled_client_loses_no_cycle_and_no_motion(tmp_path) -> 
     """The remedy: the same stalls in lockstep lose no cycle, log no violation and abort no
     motion."""
     results, lost, log = _session("lockstep", tmp_path)
-    # every motion ran to its end (none aborted by a reflex or stopped); whether the arm then
-    # stands within 10 mm of the target is franka-sim's tracking, not the clock: when a motion
-    # ends it holds the arm where it measured it, and on a loaded host that was seen 10-17 mm
-    # short of one stroke in four at most (the adapter reports it as "target not reached")
-    reasons = [r.reason for r in results]
-    assert all(r or r.reason.startswith("target not reached") for r in results), reasons
+    # every motion ran to its end and the arm stands at its target (franka-sim's servo is
+    # stable on the model it is given, FRANKA_SIM_ARMATURE: measured 0.3-0.4 mm here)
+    assert all(results), [r.reason for r in results]
+    assert max(r.position_error for r in results) < 0.002, [r.position_error for r in results]
     assert lost == 0
     assert parse_cycle_violations(log) == []
 

@@ -131,9 +131,9 @@ def robot(franka_sim_server: FrankaSimServer) -> Iterator[RetryingPanda]:
         T_WORLD_BASE,
         dynamics_factor=0.2,
         realtime=False,  # no realtime kernel here; the real robot keeps the default
-        position_tolerance=0.01,  # the simulator's Cartesian tracking lags a few mm
+        position_tolerance=0.003,
         rotation_tolerance=0.05,
-        joint_tolerance=0.02,
+        joint_tolerance=0.005,
         motion_timeout=15.0,
         settle_time=10.0,  # the simulated arm runs slower than real time on a loaded host
     )
@@ -171,7 +171,7 @@ def test_cartesian_move_reaches_the_pose(at_home: RetryingPanda) -> None:
     target = start.translated([0.05, 0.03, -0.05])
     result = robot.move_to(target, speed=0.1)
     assert result, result.reason
-    assert robot.ee_pose().distance_to(target)[0] < 0.01
+    assert robot.ee_pose().distance_to(target)[0] < 0.003
     assert result.duration > 0.0
 
 
@@ -192,7 +192,7 @@ def test_relative_moves_in_tcp_world_and_camera_frames(at_home: RetryingPanda) -
         result = robot.move_relative(delta, frame=frame, speed=0.1)
         assert result, f"{frame}: {result.reason}"
         moved = robot.ee_pose().position - start.position
-        np.testing.assert_allclose(moved, expected, atol=0.01, err_msg=frame)
+        np.testing.assert_allclose(moved, expected, atol=0.003, err_msg=frame)
 
 
 def test_joint_move(at_home: RetryingPanda) -> None:
@@ -200,7 +200,7 @@ def test_joint_move(at_home: RetryingPanda) -> None:
     q = HOME_QPOS + np.array([0.2, -0.1, 0.1, 0.15, 0.0, -0.1, 0.3])
     result = robot.move_joints(q, speed_factor=0.3)
     assert result, result.reason
-    np.testing.assert_allclose(robot.joint_positions, q, atol=0.02)
+    np.testing.assert_allclose(robot.joint_positions, q, atol=0.005)
 
 
 def test_gripper_open_and_grasp(robot: RetryingPanda) -> None:
@@ -223,9 +223,7 @@ def test_unreachable_target_is_refused_without_moving(at_home: RetryingPanda) ->
     assert robot.solve_ik(far) is None
     result = robot.move_to(far, speed=0.1)
     assert not result and result.reason.startswith("unreachable")
-    # the simulated arm still settles by up to ~0.01 rad after homing; a motion towards
-    # the refused target would move it by far more
-    np.testing.assert_allclose(robot.joint_positions, q0, atol=0.03)
+    np.testing.assert_allclose(robot.joint_positions, q0, atol=0.002)  # nothing moved
 
 
 def test_colliding_joint_target_is_refused(at_home: RetryingPanda) -> None:
@@ -234,9 +232,7 @@ def test_colliding_joint_target_is_refused(at_home: RetryingPanda) -> None:
     folded = np.array([0.0, 1.5, 0.0, -3.0, 0.0, 1.5, 0.785])  # hand into the base
     result = robot.move_joints(folded)
     assert not result and "collision" in result.reason
-    # the simulated arm still settles by up to ~0.01 rad after homing; a motion towards
-    # the refused target would move it by far more
-    np.testing.assert_allclose(robot.joint_positions, q0, atol=0.03)
+    np.testing.assert_allclose(robot.joint_positions, q0, atol=0.002)  # nothing moved
 
 
 def test_reflex_is_reported_and_recovered(
