@@ -77,8 +77,8 @@ try:
 except KeyboardInterrupt:
     pass
 finally:
+    close_trace()  # first: franka-sim's own stop can outlast the caller's patience on a busy host
     server.stop()
-    close_trace()
     os._exit(0)
 """
 
@@ -104,7 +104,8 @@ except (ImportError, AttributeError) as exc:
     monitor_log.warning("cablesim-cycles: unavailable (%s)", exc)
 else:
     _recent = collections.deque(maxlen={window} + 1)
-    _trace = open({trace!r}, "w", buffering=1 << 16) if {trace!r} else None
+    # line-buffered: every cycle is on disk even if the process is killed
+    _trace = open({trace!r}, "w", buffering=1) if {trace!r} else None
 
     def _monitored_tick(self, published_id):
         outcome = _tick(self, published_id)
@@ -112,7 +113,10 @@ else:
         lost = bool(outcome.active and outcome.lost)
         _recent.append((now, lost))
         if _trace is not None:
-            _trace.write(f"{{now:.6f}} {{published_id}} {{int(outcome.active)}} {{int(lost)}}\\n")
+            try:
+                _trace.write(f"{{now:.6f}} {{published_id}} {{int(outcome.active)}} {{int(lost)}}\\n")
+            except ValueError:  # closed: the server is shutting down
+                pass
         return outcome
 
     def _monitored_report(self, violation, *, enforced):

@@ -63,6 +63,7 @@ def _session(clock: str, work) -> tuple[list, int, str]:
     finally:
         server.stop()
     ticks = np.loadtxt(trace, ndmin=2)  # time, message id, active, lost
+    assert ticks.shape[0] > 1000 and ticks.shape[1] == 4, (ticks.shape, server.log_text()[-3000:])
     return results, int(ticks[:, 3].sum()), server.log_text()
 
 
