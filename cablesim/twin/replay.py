@@ -3,7 +3,9 @@
 Every physics step replays the sampled measurements (:mod:`cablesim.twin.sampling`) at its twin
 time: the Panda's arm position actuators get the joint positions interpolated at that time
 (extrapolated with the measured velocities for at most ``extrapolate`` s past the newest
-sample), plus ``SimPanda``'s velocity feed-forward; the gripper actuator gets the opening
+sample), plus ``SimPanda``'s velocity feed-forward; the velocities are scaled by the rate the
+robot's clock ran at against the wall clock (:meth:`Replay.clock_rate`: 1 on a robot, about 0.6
+against franka-sim in lockstep here); the gripper actuator gets the opening
 measured then -- or 0, closing with its force limit on the hose, while the robot reports a grasp
 at an opening no wider than the hose (franka-sim's gripper stops at a virtual object; here the
 fingers must really squeeze the 15 mm hose for the friction grasp to hold).  The gripper
@@ -24,6 +26,10 @@ from cablesim.twin.sampling import Track
 
 #: Velocity feed-forward through the position target: kv / kp of the arm actuators (SimPanda's).
 KV_OVER_KP = 0.1
+#: Samples (s) over which the robot's clock rate is measured (:meth:`Replay.clock_rate`).
+RATE_WINDOW = 0.025
+#: Joint speed (rad/s, norm) below which the clock rate is taken as 1.
+RATE_MIN_SPEED = 0.02
 
 
 class Replay:
@@ -71,6 +77,7 @@ class Replay:
         self._gripper_cmd = self.gripper_ctrl  # the actuator command, ramped to the goal
         self._finger_still_since: float | None = None
         self.fingers_settled = True
+        self.rate = 1.0  # the robot's clock against the wall clock (clock_rate)
 
     def command(self, t: float) -> None:
         """Set the arm and gripper actuators for the physics step that ends at twin time ``t``."""
@@ -101,11 +108,32 @@ class Replay:
             return q, np.zeros(7)
         t0, (q0, dq0) = before
         self.joint_at = t0
+        r = self.clock_rate(t0, q0, dq0)
         if after is None:
-            return q0 + dq0 * min(t - t0, self.extrapolate), dq0
+            return q0 + r * dq0 * min(t - t0, self.extrapolate), r * dq0
         t1, (q1, dq1) = after
         s = (t - t0) / max(t1 - t0, 1e-9)
-        return q0 + s * (q1 - q0), dq0 + s * (dq1 - dq0)
+        return q0 + s * (q1 - q0), r * (dq0 + s * (dq1 - dq0))
+
+    def clock_rate(self, t0: float, q0: np.ndarray, dq0: np.ndarray) -> float:
+        """How fast the robot's own time ran against the wall clock over the
+        :data:`RATE_WINDOW` s of samples up to ``t0``: the measured velocities are per second of
+        the robot's time, the replay runs in wall time.  1 on a robot (its clock is the wall
+        clock); below 1 against a lockstep simulator on a loaded host, which slows the robot's
+        time down instead of losing its cycles (measured: median 0.64 with both cores busy).
+        Feeding the robot-time velocities forward unscaled pushed the twin's arm ahead of the
+        replayed positions.  1 while the arm (nearly) rests, where it is unobservable."""
+        older = self.joints.at_or_before(t0 - RATE_WINDOW)
+        if older is None:
+            return self.rate
+        ta, (qa, dqa) = older
+        v = 0.5 * (dqa + dq0)
+        vv = float(v @ v)
+        if vv < RATE_MIN_SPEED**2 or t0 - ta <= 0.0:
+            self.rate = 1.0
+        else:
+            self.rate = float(np.clip((q0 - qa) @ v / (vv * (t0 - ta)), 0.0, 1.0))
+        return self.rate
 
     def gripper_target(self, t: float) -> float:
         """The gripper's goal (m) at wall time ``t``: the measured opening, or 0 (squeeze)

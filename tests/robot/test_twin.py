@@ -71,7 +71,10 @@ def test_the_real_runner_grasps_and_moves_the_hose_in_the_twin(episode: TwinEpis
         assert a.gain > 0.5, f"{a.label}: gain {a.gain:.3f}"
         assert a.frames_kept >= 3, f"{a.label}: {a.frames_kept} frames kept"
     assert episode.truth["unlabelled_frames"] == 0
-    assert episode.twin["tracking_mm_median"] < 5.0
+    # the twin's arm stays on the replayed joints (measured 0.14-0.39 mm median, p95 1.4-1.7,
+    # idle or with both cores busy; 2.7-6.3 mm before the robot's slower clock in lockstep
+    # was taken into account, see Replay.clock_rate)
+    assert episode.twin["tracking_mm_median"] < 1.0
 
 
 def test_frames_are_paired_with_poses_measured_at_the_same_time(episode: TwinEpisode) -> None:

@@ -51,7 +51,8 @@ def _gripper_ctrl(world: World) -> float:
 
 def test_joints_are_interpolated_and_extrapolated_a_little(world: World) -> None:
     replay, joints, _ = _replay(world)
-    q0, q1 = np.full(7, 0.1), np.full(7, 0.3)
+    # the positions advance as the measured velocities say (the robot's clock is the wall's)
+    q0, q1 = np.full(7, 0.1), np.full(7, 1.6)
     dq0, dq1 = np.full(7, 1.0), np.full(7, 2.0)
     # no sample yet: the arm is held where it is
     replay.command(5.0)
@@ -72,6 +73,31 @@ def test_joints_are_interpolated_and_extrapolated_a_little(world: World) -> None
     np.testing.assert_allclose(q, q1 + dq1 * 0.05)
     np.testing.assert_array_equal(dq, dq1)
     assert replay.joint_at == 11.0
+
+
+def test_velocities_are_replayed_at_the_rate_the_robots_clock_ran(world: World) -> None:
+    """Against a lockstep simulator on a busy host the robot's time runs slower than the wall
+    clock: its measured velocities (per second of its time) are scaled to the wall time the
+    replay runs in, for the feed-forward and the extrapolation."""
+    dq = np.linspace(0.1, 0.4, 7)
+    for rate in (0.5, 1.0):
+        replay, joints, _ = _replay(world)
+        times = 20.0 + 0.004 * np.arange(20)
+        for t in times:  # the arm moves at ``rate`` times its measured velocity
+            joints.add(float(t), (0.3 + rate * dq * (t - times[0]), dq))
+        q_last = 0.3 + rate * dq * (times[-1] - times[0])
+        q, v = replay.joint_target(float(times[-1]) + 0.01)
+        assert replay.rate == pytest.approx(rate)
+        np.testing.assert_allclose(v, rate * dq)
+        np.testing.assert_allclose(q, q_last + rate * dq * 0.01)
+        replay.command(float(times[-1]) + 0.01)
+        np.testing.assert_allclose(_arm_ctrl(world), q + KV_OVER_KP * rate * dq)
+    # an arm at rest says nothing about the clock: the rate is 1
+    replay, joints, _ = _replay(world)
+    for t in (1.0, 1.004, 1.008, 1.03, 1.034):
+        joints.add(t, (np.full(7, 0.2), np.zeros(7)))
+    replay.joint_target(1.04)
+    assert replay.rate == 1.0
 
 
 def test_the_gripper_follows_the_opening_at_the_hands_speed_and_squeezes_a_grasp(
