@@ -47,10 +47,12 @@ depth), from which the episode runner estimates the grasp centre and axis from d
 **Reward**: the gain in F_0.4 of the merged mask (``votes >= merged_votes``) of the hose of
 interest against ground truth, current image (so a failed or useless interaction gives 0 or a
 negative reward when the scene moved); computed by :mod:`cablesim.evaluation`, the only place
-the environment reads ground truth.  **Termination**: never; **truncation** after
-``budget`` interactions.  ``info``: ``hose``, ``success``, ``reason``, ``interactions``,
-``merged`` (precision, recall, f0.4, iou, pixels) and, after a successful interaction,
-``scores`` (its own mask in its own target frame).  ``info`` holds no timings, so a seeded
+the environment reads ground truth.  **Truncation** after ``budget`` interactions;
+**termination** only where the physics blew up in an interaction (``info["outcome"] ==
+"diverged"``, reward 0, the last observation; a rare hose tear, seen at the fast config's 8 ms
+step), after which ``step`` asks for a reset.  ``info``: ``hose``, ``success``, ``reason``,
+``interactions``, ``merged`` (precision, recall, f0.4, iou, pixels) and, after a successful
+interaction, ``scores`` (its own mask in its own target frame).  ``info`` holds no timings, so a seeded
 episode reproduces it exactly.
 
 ``render_mode="rgb_array"``: the current image with the merged votes in green and the start
@@ -69,8 +71,15 @@ import numpy as np
 from gymnasium import spaces
 
 from cablesim.config import Config, check_int, check_number, moved_fields, to_dict
-from cablesim.errors import CablesimError, ConfigError, InputError, UnreachableError
+from cablesim.errors import (
+    CablesimError,
+    ConfigError,
+    InputError,
+    PhysicsDivergedError,
+    UnreachableError,
+)
 from cablesim.evaluation import f04_reward
+from cablesim.outcomes import Outcome
 from cablesim.perception.flow import DISFlow
 from cablesim.perception.geometry import line_segment_mask
 from cablesim.perception.pipeline import segment_stream
@@ -244,6 +253,8 @@ class HoseExploreEnv(gym.Env):
         self._image: Any = None
         self._merged: dict[str, float] = {}
         self._count = 0
+        self._ended = ""  # why the last episode ended early (step() then asks for a reset)
+        self._last_obs: dict[str, np.ndarray] = {}
         self._prev_snap: Any = None
         self._dis: Any = None
 
@@ -299,7 +310,7 @@ class HoseExploreEnv(gym.Env):
         self._merger = VoteMerger(None)  # flows are passed explicitly
         self._prev_snap = self._evaluator.snapshot() if cfg.merge == "oracle" else None
         self._dis = DISFlow()
-        self._count = 0
+        self._count, self._ended = 0, ""
         self._image = session.capture()
         self._merged = self._merged_scores()
         info = {"hose": session.hose, "interactions": 0, "merged": self._merged}
@@ -311,7 +322,11 @@ class HoseExploreEnv(gym.Env):
     ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
 
         if self._session is None:
-            raise CablesimError("call reset() before step() (and again after close())")
+            raise CablesimError(
+                f"{self._ended}; call reset()"
+                if self._ended
+                else "call reset() before step() (and again after close())"
+            )
         index, point, angle = check_action(action)
         cfg, session = self.config, self._session
         primitive = PRIMITIVES[index]
@@ -321,7 +336,10 @@ class HoseExploreEnv(gym.Env):
         if segment is None:
             ok, reason, stream = False, "no valid depth at the point", None
         else:
-            r = session.interact(segment, interaction)
+            try:
+                r = session.interact(segment, interaction)
+            except PhysicsDivergedError as e:
+                return self._diverged(e, info)
             ok, reason, stream = r.success, r.reason, r.stream
         self._count += 1
         scores: dict[str, float] | None = None
@@ -345,6 +363,30 @@ class HoseExploreEnv(gym.Env):
             info["scores"] = scores
         truncated = self._count >= cfg.budget
         return self._obs(), reward, False, truncated, info
+
+    def _diverged(
+        self, error: PhysicsDivergedError, info: dict[str, Any]
+    ) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        """The physics blew up in the interaction (a rare hose tear at the fast config's 8 ms
+        step, seen once in a random action of ``check_env``): the episode ends there
+        (terminated, reward 0, the last observation) with the named outcome ``diverged``; the
+        world is dropped, so the next reset builds the scene again."""
+        self._count += 1
+        obs = self._last_obs  # the last step's: the state the physics left is not shown
+        self._session = None
+        if self._camera is not None:
+            self._camera.close()
+            self._camera = None
+        self._world = self._world_seed = None
+        self._ended = f"the episode ended: {Outcome.DIVERGED.value}: {error}"
+        info.update(
+            success=False,
+            reason=str(error),
+            outcome=Outcome.DIVERGED.value,
+            interactions=self._count,
+            merged=self._merged,
+        )
+        return obs, 0.0, True, False, info
 
     # ------------------------------------------------------------------ helpers
     def _line_segment(self, point: np.ndarray, angle: float) -> np.ndarray | None:
@@ -390,13 +432,14 @@ class HoseExploreEnv(gym.Env):
         robot = self._session.robot
         pos_cam = robot.ee_pose_camera().position
         grip = np.array([*pos_cam, robot.gripper_opening], np.float32)
-        return {
+        self._last_obs = {
             "rgb": img.rgb.copy(),
             "depth": depth,
             "votes": v,
             "segment": (self._segment > 0).astype(np.uint8),
             "gripper": np.clip(grip, -10.0, 10.0),
         }
+        return {k: a.copy() for k, a in self._last_obs.items()}
 
     def render(self) -> np.ndarray | None:
         if self.render_mode != "rgb_array" or self._image is None:

@@ -98,3 +98,34 @@ def test_async_vector_env():
         assert rew.shape == (2,) and np.isfinite(rew).all()
     finally:
         envs.close()
+
+
+def test_physics_that_blows_up_ends_the_episode_with_a_named_outcome():
+    """A hose torn in an interaction (provoked here: a stretch limit of 1.5 %, which a grasped
+    hose passes at once; seen in earnest as a 53 % tear at the fast config's 8 ms step) ends
+    the episode: terminated, reward 0, the last observation, ``outcome`` "diverged"; a further
+    step asks for a reset, and the reset builds a clean scene."""
+    cfg = TINY.with_values(
+        {
+            "episode.scene.physics.max_hose_strain": 0.015,
+            "episode.scene.physics.rescue_strain": 0.0,
+        }
+    )
+    env = HoseExploreEnv(cfg)
+    try:
+        obs, _ = env.reset(seed=5)
+        obs_after, reward, terminated, truncated, info = env.step(aim_at_segment(obs))
+        assert terminated and not truncated and reward == 0.0
+        assert info["outcome"] == "diverged" and not info["success"]
+        assert "physics.max_hose_strain 0.015" in info["reason"]
+        assert info["interactions"] == 1
+        assert env.observation_space.contains(obs_after)
+        for k in obs:
+            assert np.array_equal(obs[k], obs_after[k]), k
+        with pytest.raises(cablesim.CablesimError, match="episode ended: diverged.*call reset"):
+            env.step(aim_at_segment(obs))
+        again, _ = env.reset(seed=5)
+        for k in obs:
+            assert np.array_equal(obs[k], again[k]), k
+    finally:
+        env.close()
