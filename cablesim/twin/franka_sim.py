@@ -360,7 +360,8 @@ class FrankaSimServer:
     commands on its own differential IK of each commanded pose, which trips at the end of
     ordinary slow motions on this model, so that one check is loosened by default.
     ``trace``: a file the server appends every state cycle to (``time message_id active
-    lost``), written when it stops; for ``benchmarks/franka_sim_timing.py``.
+    lost``), line by line as the cycles pass (closed before franka-sim's own stop); for
+    ``benchmarks/franka_sim_timing.py``.
     ``clock``: ``"lockstep"`` (default: a cycle ends when the client has answered it, so a
     host that runs either process late slows the robot's time down instead of losing cycles;
     see ``_LOCKSTEP``) or ``"realtime"`` (franka-sim's own 1 kHz wall-clock pacing, where a
