@@ -206,18 +206,23 @@ def twin_episode(
     robot_options: dict[str, Any] | None = None,
     monitor_every: float = 0.0,
     camera_timeout: float = 5.0,
-    drain: float = 20.0,
+    drain: float = 120.0,
+    max_lag: float = 120.0,
 ) -> TwinEpisode:
     """One interaction on the franka-sim server at ``host`` with a twin of ``config``'s scene
     (module docstring).  The server must be running (:class:`FrankaSimServer`), its virtual
     gripper object as wide as the hose.  ``monitor_every`` > 0: ``say`` the twin's
     statistics every so many seconds while it follows.  ``drain``: how long the clock waits
-    after an action for the frames the twin rendered of it (the twin may lag)."""
+    after an action for the frames the twin rendered of it (the twin may lag).  ``max_lag``:
+    the twin's (:class:`TwinWorld`): on a host too loaded for the twin to keep real time
+    (physics 0.77x real time with a CI run and tests/robot side by side on 2 cores) its lag
+    grew past 20 s within an interaction, and skipping ahead dropped a whole action's frames;
+    with both at 120 s the twin re-enacts every action, late."""
 
     cfg = config
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    twin = TwinWorld(cfg, fps=fps)
+    twin = TwinWorld(cfg, fps=fps, max_lag=max_lag)
     robot = feed = camera = monitor = None
     try:
         timings["build"] = time.perf_counter() - t0

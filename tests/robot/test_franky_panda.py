@@ -276,7 +276,13 @@ def test_a_motion_starts_only_from_rest(
                 q, fr.ReferenceType.Absolute, fr.RelativeDynamicsFactor(0.1, 0.2, 0.2)
             )
             raw.robot.move(slow, asynchronous=True)
-            time.sleep(0.3)  # under way
+            # under way: joint 1 has left home (a fixed 0.3 s sleep was not enough on a loaded
+            # host, where the lockstep robot's clock runs slow: the arm had not started, and
+            # the motion that should be refused ran; CI clone run beside tests/robot)
+            deadline = time.monotonic() + 10.0
+            while abs(raw.joint_positions[0] - HOME_QPOS[0]) < 0.01:
+                assert time.monotonic() < deadline, "the slow motion did not start in 10 s"
+                time.sleep(0.01)
             refused = raw.move_joints(np.asarray(HOME_QPOS), speed_factor=0.3)
             q_refused = raw.joint_positions
             try:
