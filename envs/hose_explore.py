@@ -52,8 +52,8 @@ the environment reads ground truth.  **Truncation** after ``budget`` interaction
 "diverged"``, reward 0, the last observation; a rare hose tear, seen at the fast config's 8 ms
 step), after which ``step`` asks for a reset.  ``info``: ``hose``, ``success``, ``reason``,
 ``interactions``, ``merged`` (precision, recall, f0.4, iou, pixels) and, after a successful
-interaction, ``scores`` (its own mask in its own target frame).  ``info`` holds no timings, so a seeded
-episode reproduces it exactly.
+interaction, ``scores`` (its own mask in its own target frame).  ``info`` holds no timings,
+so a seeded episode reproduces it exactly.
 
 ``render_mode="rgb_array"``: the current image with the merged votes in green and the start
 segment in magenta.
