@@ -373,11 +373,7 @@ class HoseExploreEnv(gym.Env):
         world is dropped, so the next reset builds the scene again."""
         self._count += 1
         obs = self._last_obs  # the last step's: the state the physics left is not shown
-        self._session = None
-        if self._camera is not None:
-            self._camera.close()
-            self._camera = None
-        self._world = self._world_seed = None
+        self.close()  # the next reset builds the scene again
         self._ended = f"the episode ended: {Outcome.DIVERGED.value}: {error}"
         info.update(
             success=False,

@@ -46,12 +46,6 @@ class Track:
             after = (self.times[i], self.values[i]) if i < len(self.times) else None
             return before, after
 
-    def at_or_before(self, t: float) -> tuple[float, Any] | None:
-        """The newest sample at or before ``t``."""
-        with self.lock:
-            i = bisect.bisect_right(self.times, t)
-            return (self.times[i - 1], self.values[i - 1]) if i > 0 else None
-
     def forget_before(self, t: float) -> None:
         """Drop samples older than ``t`` (keeping the newest one at or before it)."""
         with self.lock:
