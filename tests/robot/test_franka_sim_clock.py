@@ -85,8 +85,11 @@ def test_in_lockstep_a_stalled_client_loses_no_cycle_and_no_motion(tmp_path) -> 
     motion."""
     results, lost, log = _session("lockstep", tmp_path)
     # every motion ran to its end and the arm stands at its target (franka-sim's servo is
-    # stable on the model it is given, FRANKA_SIM_ARMATURE: measured 0.3-0.4 mm here)
-    assert all(results), [r.reason for r in results]
+    # stable on the model it is given, FRANKA_SIM_ARMATURE: measured 0.3-0.4 mm here); a
+    # failure shows the lost cycles and franka-sim's own violation lines (value and limit), so
+    # that a rare abort (1 in 30 runs on a loaded host) names its cause
+    violations = [line for line in log.splitlines() if "violat" in line]
+    assert all(results), ([r.reason for r in results], lost, violations[-20:])
     assert max(r.position_error for r in results) < 0.002, [r.position_error for r in results]
     assert lost == 0
     assert parse_cycle_violations(log) == []
