@@ -337,10 +337,18 @@ def server_python() -> str | None:
 
 
 def ports_free() -> bool:
-    """Whether libfranka's ports are free on 127.0.0.1 (TCP and UDP)."""
+    """Whether libfranka's ports are free on the server's loopback address (TCP and UDP).
+
+    The TCP probe binds with ``SO_REUSEADDR``, as franka-sim's own listening sockets do: a
+    server stopped while its client was still connected closes first and leaves its port in
+    ``TIME_WAIT`` for a minute, which franka-sim binds over but a plain bind refuses (a run
+    of robot tests right after one whose twin episode failed skipped 13 tests, "ports in
+    use", with no server running).  A port another server listens on is still refused."""
     for port in PORTS:
         for kind in (socket.SOCK_STREAM, socket.SOCK_DGRAM):
             with socket.socket(socket.AF_INET, kind) as s:
+                if kind == socket.SOCK_STREAM:
+                    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
                 try:
                     s.bind((HOST, port))
                 except OSError:

@@ -98,3 +98,24 @@ def test_in_lockstep_a_stalled_client_loses_no_cycle_and_no_motion(tmp_path) -> 
 def test_an_unknown_clock_is_refused() -> None:
     with pytest.raises(InputError, match="clock: 'wall'"):
         FrankaSimServer(clock="wall")
+
+
+def test_a_port_left_in_time_wait_is_free_and_a_listening_one_is_not() -> None:
+    """A server stopped under a connected client leaves its port in TIME_WAIT (the server
+    side closed first); franka-sim binds over that, so the probe must not call it in use."""
+    import socket
+
+    from cablesim.twin.franka_sim import PORTS, ports_free
+
+    if not ports_free():
+        pytest.skip(f"ports {PORTS} on {HOST} are in use")
+    with socket.socket() as listener:
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind((HOST, PORTS[0]))
+        listener.listen(1)
+        assert not ports_free()  # a server listens there
+        with socket.create_connection((HOST, PORTS[0])) as client:
+            conn, _ = listener.accept()
+            conn.close()  # the server's side closes first: its port goes to TIME_WAIT
+            client.recv(1)
+    assert ports_free()
