@@ -3,7 +3,8 @@
 Timing scripts (``python -m benchmarks.<name>``): ``bench_sim``, ``bench_render``,
 ``bench_perception``, ``bench_episode``, ``episode_variants``, ``bench_throughput``,
 ``bench_solver``, ``bench_env``, ``soak_env``, ``bench_twin``, ``franka_sim_timing``, and the
-seed sweep ``seeds`` (its runner is :mod:`cablesim.sweep`).  Experiments of the thesis's
+seed sweep ``seeds`` (its runner is :mod:`cablesim.sweep`), the cable kinds side by side
+``cable_kinds``.  Experiments of the thesis's
 perception (``python -m benchmarks.experiments.<name>``): ``realistic_flow`` (record, evaluate,
 report), ``compare_methods``, ``compare_published``, ``published_reference``.  Each writes its
 results, with the run's provenance (:mod:`cablesim.provenance`), to :data:`RESULTS`.

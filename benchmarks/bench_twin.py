@@ -57,7 +57,9 @@ def main() -> int:
         cfg = config(seed)
         load0 = os.getloadavg()[0]
         t0 = time.perf_counter()
-        with FrankaSimServer(object_width=2 * cfg.scene.hoses.radius, enforce_motion_limits=False):
+        with FrankaSimServer(
+            object_width=cfg.scene.hoses.max_diameter(), enforce_motion_limits=False
+        ):
             ep = twin_episode(cfg, say=say, monitor_every=5.0)
         twin_s = time.perf_counter() - t0
         say(ep.summary())

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.cables import DEFAULT_KIND, cable_kind
 from cablesim.calibration import load_calibration
 from cablesim.camera.base import Camera
 from cablesim.camera.realsense import RealSenseCamera
@@ -67,6 +68,9 @@ class RealConfig(Config):
     seed: int = 0  # the policy's own random choices (random-grasp baseline)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     interaction: InteractionConfig = field(default_factory=InteractionConfig)
+    # the kind of the cables on the bench (``cablesim cables``): the grasp closes on its
+    # diameter where ``interaction.grasp`` leaves width, epsilon and surface offset open
+    cable: str = DEFAULT_KIND
 
     def validate(self) -> RealConfig:
         if not self.robot_host:
@@ -94,6 +98,7 @@ class RealConfig(Config):
                 )
         self.safety.validate()
         self.interaction.validate()
+        cable_kind(self.cable, "cable")
         return self
 
 

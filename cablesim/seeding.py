@@ -31,6 +31,7 @@ STREAMS: tuple[str, ...] = (
     "calibration",  # the board poses drawn by ``cablesim calibrate``
     "lighting",  # light jitter (LightConfig.jitter)
     "dataset",  # a dataset scene's randomised background, hoses, light and camera
+    "dataset_kinds",  # a dataset scene's cable kinds, one per cable
 )
 
 

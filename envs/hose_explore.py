@@ -332,7 +332,7 @@ class HoseExploreEnv(gym.Env):
         primitive = PRIMITIVES[index]
         segment = self._line_segment(point, angle)
         info: dict[str, Any] = {"hose": session.hose, "primitive": primitive}
-        interaction = session.cfg.interaction.replace(kind=primitive)
+        interaction = session.interaction_config().replace(kind=primitive)
         if segment is None:
             ok, reason, stream = False, "no valid depth at the point", None
         else:

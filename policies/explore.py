@@ -211,6 +211,7 @@ def grasp_reachability(robot: Any, T_world_camera: np.ndarray, cfg: Any) -> Call
     on the grasp built from a camera-frame (centre, axis) of a proposal."""
 
     T = np.asarray(T_world_camera, float)
+    cfg = cfg.fitted()  # a session's config is fitted already; a bare one: the default cable
 
     def reachable(centre_cam: np.ndarray, axis_cam: np.ndarray) -> tuple[bool, str]:
         centre = prim.grasp_centre(T, centre_cam, cfg.grasp.surface_offset)
@@ -307,7 +308,7 @@ class Exploration:
         )
         self.record_to = None if record_to is None else Path(record_to)
         self.published: list[str] = []  # sequences written in the published layout
-        self.interaction_cfg = session.cfg.interaction
+        self.interaction_cfg = session.interaction_config()
         self.T = np.asarray(session.T_world_camera, float)
         self.flow = make_flow(cfg.flow, **(flow_kwargs or {}))
         self.reachable = grasp_reachability(session.robot, self.T, self.interaction_cfg)

@@ -19,6 +19,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
+from cablesim.cables import CABLE_KINDS, DEFAULT_KIND
 from cablesim.config import ConfigMigrationWarning, flatten, parse_value, replace_paths
 from cablesim.errors import ConfigError, InputError
 from cablesim.panda.description import VISUALS
@@ -31,6 +32,7 @@ SCENE_FLAGS: Mapping[str, str] = {
     "seed": "seed",
     "draw": "draw",
     "hoses": "hoses.count",
+    "cable": "hoses.kind",
     "width": "camera.width",
     "height": "camera.height",
     "robot_visual": "robot.visual",
@@ -184,6 +186,9 @@ def build_config(
         for dest, path in flags.items()
         if getattr(args, dest, None) is not None
     }
+    for path in list(changes):  # --cable KIND: every cable of that kind, none per cable
+        if path == "hoses.kind" or path.endswith(".hoses.kind"):
+            changes[path + "s"] = ()
     changes.update(values or {})
     changes.update(set_values(args))
     return replace_paths(cfg, changes, shortcuts=False) if changes else cfg
@@ -217,6 +222,16 @@ def add_grow_colour_argument(p: argparse.ArgumentParser, applies_to: str = "") -
     )
 
 
+def add_cable_argument(p: argparse.ArgumentParser, default: str = DEFAULT_KIND) -> None:
+    """``--cable KIND``: every cable of one kind (``cablesim cables`` lists them)."""
+    p.add_argument(
+        "--cable",
+        choices=tuple(CABLE_KINDS),
+        default=None,
+        help=f"the kind of every cable (default {default}; `cablesim cables` lists them)",
+    )
+
+
 def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed") -> None:
     add_config_arguments(p)
     p.add_argument("--seed", type=int, default=None, help=f"{seed_help} (default 0)")
@@ -228,6 +243,7 @@ def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed
         "when a draw does not settle or has no suitable hose, and records which draw served)",
     )
     p.add_argument("--hoses", type=int, default=None, help="number of hoses (default 4)")
+    add_cable_argument(p)
     p.add_argument("--width", type=int, default=None, help="image width (default 640)")
     p.add_argument("--height", type=int, default=None, help="image height (default 480)")
     p.add_argument(

@@ -21,7 +21,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from cablesim.commands._args import add_config_arguments, build_config, show_config
+from cablesim.commands._args import (
+    add_cable_argument,
+    add_config_arguments,
+    build_config,
+    show_config,
+)
 from cablesim.jobs import parse_range
 from cablesim.thesis import ThesisConfig, run_thesis
 
@@ -30,6 +35,7 @@ FLAGS = {
     "width": "scene.width",
     "height": "scene.height",
     "hoses": "scene.hoses",
+    "cable": "scene.cable",
     "periods": "scene.periods",
     "workers": "workers",
     "ray": "ray",
@@ -67,6 +73,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--width", type=int)
     p.add_argument("--height", type=int)
     p.add_argument("--hoses", type=int)
+    add_cable_argument(p)
     p.add_argument("--periods", type=int, help="periods per action (K_p)")
     p.add_argument("--no-explore", action="store_true", help="skip tables 6.8/6.9")
     p.add_argument("--no-clips", action="store_true", help="skip chapter 5")

@@ -23,6 +23,8 @@ import argparse
 import json
 from pathlib import Path
 
+from cablesim.cables import CABLE_KINDS
+from cablesim.commands._args import add_cable_argument
 from cablesim.errors import ConfigError
 from cablesim.files import OutputLock, write_text
 from cablesim.jobs import Job, execute, load_results, parse_range
@@ -39,6 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ray", help="run on Ray: auto, an address, or local")
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--height", type=int, default=480)
+    add_cable_argument(p, default="drawn per cable from every kind")
     p.add_argument("--periods", type=int, default=None, help="periods per action (1 clip, 3 mcor)")
     p.add_argument("--quiet", action="store_true")
 
@@ -51,7 +54,9 @@ def dataset_jobs(
     split: str,
     scene: dict,
     periods: int | None = None,
+    cable_kinds: tuple[str, ...] = tuple(CABLE_KINDS),
 ) -> list:
+    """One job per seed; each scene randomised, its cables' kinds drawn from ``cable_kinds``."""
 
     if layout == "mcor" and split == "train":
         raise ConfigError("--split", "the motion-correlation annotations have validation and test")
@@ -62,7 +67,7 @@ def dataset_jobs(
             "split": split,
             "root": str(Path(root).resolve()),  # worker processes (Ray) have their own cwd
             "scene": scene,
-            "randomize": True,
+            "randomize": {"cable_kinds": list(cable_kinds)},
             "periods": periods if periods is not None else (1 if layout == "movingcables" else 3),
         }
         if layout == "movingcables":
@@ -80,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
     if args.layout == "movingcables" and b - a > 9999:
         raise ConfigError("--scenes", "a MovingCables split holds at most 9999 clips")
     scene = {"width": args.width, "height": args.height}
-    jobs = dataset_jobs(args.layout, a, b, args.out, args.split, scene, args.periods)
+    kinds = (args.cable,) if args.cable is not None else tuple(CABLE_KINDS)
+    jobs = dataset_jobs(args.layout, a, b, args.out, args.split, scene, args.periods, kinds)
     with OutputLock(args.out):  # refused at once while another command writes there
         summary = execute(
             jobs,

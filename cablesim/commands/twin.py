@@ -52,7 +52,9 @@ def run(args: argparse.Namespace) -> int:
     if args.no_server:
         ep = twin_episode(cfg, say=say, monitor_every=5.0 if not args.quiet else 0.0)
     else:
-        with FrankaSimServer(object_width=cfg.scene.hoses.radius * 2, enforce_motion_limits=False):
+        with FrankaSimServer(
+            object_width=cfg.scene.hoses.max_diameter(), enforce_motion_limits=False
+        ):
             ep = twin_episode(cfg, say=say, monitor_every=5.0 if not args.quiet else 0.0)
     print(ep.summary())
     metrics = {"twin": ep.metrics()}

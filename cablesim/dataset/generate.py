@@ -63,10 +63,16 @@ def scene_from(params: dict[str, Any]) -> SceneConfig:
             values[path] = int(size[name])
     if "hoses" in size:
         values["hoses.count"] = int(size["hoses"])
+    if "cable" in size:
+        values["hoses.kind"] = str(size["cable"])
     base = SceneConfig().with_values(values)
     if params.get("randomize", False):
-        r = params["randomize"]
-        return randomize_scene(base.seed, base, Randomization(**(r if isinstance(r, dict) else {})))
+        r = dict(params["randomize"]) if isinstance(params["randomize"], dict) else {}
+        if "cable" in size:  # one kind asked for: the randomiser draws no kinds
+            r["cable_kinds"] = (str(size["cable"]),)
+        if "cable_kinds" in r:
+            r["cable_kinds"] = tuple(r["cable_kinds"])
+        return randomize_scene(base.seed, base, Randomization(**r))
     return base
 
 

@@ -1,5 +1,6 @@
 """Randomised scenes for datasets: background, hose count and colours, lighting and camera pose
-drawn from the seed's ``dataset`` stream (so a scene depends on its seed alone).
+drawn from the seed's ``dataset`` stream, the cable kinds from its ``dataset_kinds`` stream (so
+a scene depends on its seed alone).
 
     scene = randomize_scene(1234, SceneConfig(), Randomization())
 """
@@ -9,6 +10,7 @@ from __future__ import annotations
 import colorsys
 from dataclasses import dataclass
 
+from cablesim.cables import DEFAULT_KIND, cable_kind
 from cablesim.config import Config, check_positive
 from cablesim.errors import ConfigError
 from cablesim.seeding import stream
@@ -25,6 +27,10 @@ class Randomization(Config):
     light_jitter: float = 0.3  # LightConfig.jitter
     camera_position_jitter: float = 0.02  # metres, CameraConfig.position_jitter
     camera_look_at_jitter: float = 0.03
+    # the kind of each cable, drawn uniformly per cable from these (one: every cable of it);
+    # ``cablesim dataset`` draws from every kind unless ``--cable`` names one, the default
+    # here keeps the jobs of datasets made before kinds existed what they were
+    cable_kinds: tuple[str, ...] = (DEFAULT_KIND,)
 
     def _validate(self) -> None:
         for b in self.backgrounds:
@@ -40,6 +46,10 @@ class Randomization(Config):
         check_positive("light_jitter", self.light_jitter, allow_zero=True)
         check_positive("camera_position_jitter", self.camera_position_jitter, allow_zero=True)
         check_positive("camera_look_at_jitter", self.camera_look_at_jitter, allow_zero=True)
+        if not self.cable_kinds:
+            raise ConfigError("cable_kinds", "need at least one cable kind")
+        for i, name in enumerate(self.cable_kinds):
+            cable_kind(name, f"cable_kinds[{i}]")
 
 
 def randomize_scene(seed: int, base: SceneConfig, r: Randomization | None = None) -> SceneConfig:
@@ -61,6 +71,12 @@ def randomize_scene(seed: int, base: SceneConfig, r: Randomization | None = None
             )
             for _ in range(8)
         )
+    kinds = tuple(dict.fromkeys(r.cable_kinds))
+    if len(kinds) == 1:
+        values["hoses.kind"], values["hoses.kinds"] = kinds[0], ()
+    else:  # its own stream: the draws above are those of datasets made before kinds existed
+        pick = stream(seed, "dataset_kinds").integers(len(kinds), size=int(values["hoses.count"]))
+        values["hoses.kinds"] = tuple(kinds[int(k)] for k in pick)
     values["light.jitter"] = float(r.light_jitter)
     values["camera.position_jitter"] = float(r.camera_position_jitter)
     values["camera.look_at_jitter"] = float(r.camera_look_at_jitter)

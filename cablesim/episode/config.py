@@ -16,12 +16,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from cablesim.cables import CABLE_KINDS, DEFAULT_KIND
 from cablesim.config import Config, check_positive, check_vector
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
 
 #: What an interaction does with the hose.
 KINDS = ("grasp", "push")
+#: What an unfitted grasp closes on: the default cable kind's diameter (m).
+DEFAULT_DIAMETER = 2 * CABLE_KINDS[DEFAULT_KIND].radius
+#: A fitted grasp accepts an opening within this fraction of the diameter around it (the
+#: 15 mm hose: 12 mm, the value of the thesis's setup).
+GRASP_EPSILON_RATIO = 0.8
 #: Named action directions (see :func:`cablesim.episode.primitives.action_direction`).
 DIRECTION_NAMES = ("along", "across", "normal", "vertical", "horizontal")
 
@@ -37,12 +43,14 @@ class GraspConfig(Config):
     # that the arm does not sweep through the hoses in front of the board (measured: 0.12 m
     # still let the turning hand push a hose 2.7 cm; 0.2 m did not)
     standoff: float = 0.2
-    surface_offset: float = 0.0075  # m from the seen surface to the hose axis (its radius)
+    # m from the seen surface to the cable axis; None: the grasped cable's radius
+    surface_offset: float | None = None
     approach_speed: float = 0.05  # m/s for the last straight approach
     travel_speed: float = 0.25  # m/s for free motions
-    width: float = 0.015  # m, hose diameter the gripper closes on
+    width: float | None = None  # m the gripper closes on; None: the grasped cable's diameter
     force: float = 70.0  # N
-    epsilon: float = 0.012  # m, accepted opening around ``width`` (franky epsilon)
+    # m, accepted opening around ``width`` (franky epsilon); None: 0.8 x the cable's diameter
+    epsilon: float | None = None
     hold_check_distance: float = 0.01  # m pulled back from the board to test the hold
     hold_tolerance: float = 0.005  # m, hose point vs hand displacement (sim verification)
     open_width: float = 0.08
@@ -57,18 +65,38 @@ class GraspConfig(Config):
     # one that went wrong 0.34 (its hoses moved up to 0.68 m).
     min_follow_r2: float = 0.9
 
+    def fitted(self, diameter: float | None = None) -> GraspConfig:
+        """This config with ``width``, ``epsilon`` and ``surface_offset`` that are None made
+        those of a cable of ``diameter`` (m): the diameter, 0.8 of it and its half.  A
+        session fits its interaction to the cable it grasps (``Session.interaction_config``);
+        ``diameter`` None is the default cable kind's (the 15 mm garden hose: 15, 12 and
+        7.5 mm), what a config not fitted by a session closes on."""
+        if diameter is None:
+            diameter = DEFAULT_DIAMETER
+        check_positive("grasp diameter", diameter)
+        values = {
+            "width": diameter if self.width is None else self.width,
+            "epsilon": GRASP_EPSILON_RATIO * diameter if self.epsilon is None else self.epsilon,
+            "surface_offset": diameter / 2 if self.surface_offset is None else self.surface_offset,
+        }
+        if all(getattr(self, k) == v for k, v in values.items()):
+            return self
+        return self.replace(**values)
+
     def _validate(self) -> None:
         for name in (
             "pregrasp_offset",
             "approach_speed",
             "travel_speed",
-            "width",
             "force",
-            "epsilon",
             "open_width",
         ):
             check_positive(f"grasp.{name}", getattr(self, name))
-        check_positive("grasp.surface_offset", self.surface_offset, allow_zero=True)
+        for name in ("width", "epsilon"):
+            if getattr(self, name) is not None:
+                check_positive(f"grasp.{name}", getattr(self, name))
+        if self.surface_offset is not None:
+            check_positive("grasp.surface_offset", self.surface_offset, allow_zero=True)
         check_positive("grasp.standoff", self.standoff, allow_zero=True)
         check_positive("grasp.hold_check_distance", self.hold_check_distance, allow_zero=True)
         check_positive("grasp.hold_tolerance", self.hold_tolerance)
@@ -214,6 +242,12 @@ class InteractionConfig(Config):
     actions: ActionConfig = field(default_factory=ActionConfig)
     capture: CaptureConfig = field(default_factory=CaptureConfig)
     retreat: RetreatConfig = field(default_factory=RetreatConfig)
+
+    def fitted(self, diameter: float | None = None) -> InteractionConfig:
+        """This interaction with its grasp fitted to a cable of ``diameter`` (m; see
+        :meth:`GraspConfig.fitted`)."""
+        grasp = self.grasp.fitted(diameter)
+        return self if grasp is self.grasp else self.replace(grasp=grasp)
 
     def _validate(self) -> None:
         if self.kind not in KINDS:

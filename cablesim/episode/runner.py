@@ -255,7 +255,8 @@ class InteractionState:
         truth: TruthProvider | None = None,
         options: InteractionOptions | None = None,
     ) -> InteractionState:
-        cfg = (config or InteractionConfig()).validate()
+        # a grasp left open closes on the default cable (sessions fit it to theirs)
+        cfg = (config or InteractionConfig()).validate().fitted()
         opts = options or InteractionOptions()
         T = camera.T_world_camera if camera.T_world_camera is not None else robot.T_world_camera
         park = None if opts.park is None else tuple(opts.park)
@@ -510,7 +511,9 @@ def run_interaction(
     ``truth``: a ground-truth provider (simulation, digital twin), used only when
     ``config.capture.ground_truth``.  ``options``: the run-time companions
     (:class:`InteractionOptions`: frame sink, progress, known hose, park pose, arm masks,
-    grasp-retry random stream).
+    grasp-retry random stream).  A grasp the config leaves open (``width`` None, ...) closes
+    on the default cable kind; sessions fit it to the grasped cable
+    (``Session.interaction_config``).
     """
     state = InteractionState.begin(robot, camera, clock, segment, config, truth, options)
     for phase in PHASES:

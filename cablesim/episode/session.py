@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from cablesim.cables import cable_kind
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.runner import InteractionOptions, InteractionResult, run_interaction
@@ -46,6 +47,18 @@ class Session:
         base = getattr(arm, "base", None)
         return np.eye(4) if base is None else base.matrix()
 
+    def cable_diameter(self) -> float | None:
+        """The diameter (m) of the cable the interaction grasps, as the config describes it
+        (``RealConfig.cable``, a simulated scene's cable kinds); None: not described (the
+        default kind's)."""
+        name = getattr(self.cfg, "cable", None)
+        return None if name is None else 2 * cable_kind(name, "cable").radius
+
+    def interaction_config(self, interaction: InteractionConfig | None = None) -> InteractionConfig:
+        """``interaction`` (default: the config's) with its grasp fitted to the cable grasped
+        (:meth:`cable_diameter`; ``GraspConfig.fitted``)."""
+        return (interaction or self.cfg.interaction).fitted(self.cable_diameter())
+
     @property
     def park(self) -> tuple[float, ...]:
         """The joint configuration out of the camera's view."""
@@ -66,7 +79,7 @@ class Session:
         say: Say | None = None,
     ) -> InteractionResult:
         """One interaction at ``segment`` of the current image (:func:`run_interaction`)."""
-        interaction = interaction or self.cfg.interaction
+        interaction = self.interaction_config(interaction)
         options = InteractionOptions(
             sink=sink,
             say=say,

@@ -125,7 +125,7 @@ class ArmModel:
         rotation_tolerance: float = 5e-3,
         max_iterations: int = 60,
         hose_capsules: Sequence[float] = (),
-        hose_radius: float = 0.01,
+        hose_radius: float | Sequence[float] = 0.01,
     ):
         spec = mujoco.MjSpec()
         self.base = Pose(np.asarray(base_pos, dtype=float), np.asarray(base_quat, dtype=float))
@@ -142,12 +142,13 @@ class ArmModel:
         self.obstacle_names = tuple(ob.name for ob in obstacles)
         # movable capsules for the hoses (set_hoses), each on a mocap body (the world body's
         # bounding volumes are computed once, at compile time): only the arm links collide
+        radii = np.broadcast_to(np.asarray(hose_radius, dtype=float), (len(hose_capsules),))
         for k, half in enumerate(hose_capsules):
             body = spec.worldbody.add_body(name=f"hose/{k}", mocap=True, pos=list(_PARKED))
             g = body.add_geom(
                 name=f"hose/{k}",
                 type=mujoco.mjtGeom.mjGEOM_CAPSULE,
-                size=[hose_radius, float(half), 0],
+                size=[float(radii[k]), float(half), 0],
             )
             g.contype, g.conaffinity, g.group = _HOSE_BIT, 0, 3
         self.model = spec.compile()

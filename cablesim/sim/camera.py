@@ -103,7 +103,7 @@ class SimSnapshot:
     body: np.ndarray  # HxW int32
     hose_vertices: tuple[np.ndarray, ...]  # per hose (V, 3) world
     hose_twist: tuple[np.ndarray, ...]  # per hose (V - 1,) twist hinge angles, radians
-    hose_radius: float
+    hose_radius: tuple[float, ...]  # per hose, m
     body_pos: np.ndarray  # (nbody, 3)
     body_mat: np.ndarray  # (nbody, 3, 3)
     meta: dict[str, Any] = field(default_factory=dict)
@@ -246,7 +246,7 @@ class SimCamera(Camera):
             body=body,
             hose_vertices=verts,
             hose_twist=twist,
-            hose_radius=float(self.world.cfg.hoses.radius),
+            hose_radius=tuple(float(h.spec.radius) for h in self.world.hoses),
             body_pos=d.xpos.copy(),
             body_mat=d.xmat.reshape(-1, 3, 3).copy(),
             meta=dict(meta),

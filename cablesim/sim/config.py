@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
+from cablesim.cables import DEFAULT_KIND, CableKind, cable_kind
 from cablesim.config import (
     Config,
     check_number,
@@ -114,90 +115,140 @@ class BoardConfig(Config):
 
 @dataclass(frozen=True)
 class HoseConfig(Config):
-    """Ranges from which each hose's properties are drawn (seeded)."""
+    """The cables of a scene: how many, how long, of which kind (:mod:`cablesim.cables`),
+    and any of the kind's parameters overridden.  Each cable's values are drawn from these
+    ranges (seeded); :meth:`cable` gives the parameters cable ``i`` is built with."""
 
     SECTION = "hoses"
 
     count: int = 4
     length: tuple[float, float] = (0.6, 1.5)
-    radius: float = 0.0075  # 15 mm thick
-    segment_length: float = 0.03  # target edge length; vertex count follows from the length
-    young: tuple[float, float] = (2e6, 8e6)  # Pa, bending/twist stiffness of the rod
-    poisson: float = 0.3
-    mass_per_metre: float = 0.15  # kg/m
-    damping: float = 0.02  # N s/m on each hose vertex dof (air drag, internal losses)
+    # the kind of every cable (``cablesim cables`` lists them), or one kind per cable in
+    # ``kinds`` (cable i is ``kinds[i % len(kinds)]``; empty: every cable is ``kind``)
+    kind: str = DEFAULT_KIND
+    kinds: tuple[str, ...] = ()
+    # overrides of the kinds' parameters, for every cable; None: the cable's kind's value
+    radius: float | None = None  # m (garden hose: 0.0075, 15 mm thick)
+    segment_length: float | None = None  # target edge length; vertex count follows
+    young: tuple[float, float] | None = None  # Pa, bending/twist stiffness of the rod
+    poisson: float | None = None
+    mass_per_metre: float | None = None  # kg/m
+    damping: float | None = None  # N s/m on each vertex dof (air drag, internal losses)
     both_ends_probability: float = 0.75  # else attached at one end and hanging free
-    colors: tuple[tuple[float, float, float], ...] = (
-        (0.85, 0.20, 0.15),
-        (0.15, 0.55, 0.20),
-        (0.15, 0.35, 0.80),
-        (0.95, 0.75, 0.10),
-        (0.10, 0.10, 0.10),
-        (0.90, 0.45, 0.10),
-        (0.55, 0.20, 0.65),
-        (0.85, 0.85, 0.85),
-    )
-    color_jitter: float = 0.06
-    friction: float = 0.9
+    colors: tuple[tuple[float, float, float], ...] | None = None
+    color_jitter: float | None = None
+    friction: float | None = None
     # cross-section of the rod: "circle" of ``radius`` (default), or "box" of half-sizes
     # ``section_size`` (a flat ribbon), which MuJoCo draws in the rod's material frame, so its
     # twist shows in the image (the twist check of the ground-truth flow uses one)
     section: str = "circle"
-    section_size: tuple[float, float] = (0.0075, 0.0075)
+    section_size: tuple[float, float] | None = None  # None: (radius, radius)
+
+    def kind_of(self, i: int) -> str:
+        """The kind of cable ``i``."""
+        return self.kinds[i % len(self.kinds)] if self.kinds else self.kind
+
+    def used_kinds(self) -> tuple[str, ...]:
+        """The kinds of the ``count`` cables, each once, in cable order."""
+        return tuple(dict.fromkeys(self.kind_of(i) for i in range(self.count)))
+
+    def max_diameter(self) -> float:
+        """The thickest cable's diameter (m): what a gripper closing on any of them needs."""
+        return max(2 * self.cable(i).radius for i in range(self.count))
+
+    def cable(self, i: int) -> CableKind:
+        """The parameters cable ``i`` is built with: its kind's, with this config's overrides."""
+        return self._resolve(self.kind_of(i))
+
+    def _resolve(self, name: str) -> CableKind:
+        base = cable_kind(name, "hoses.kinds" if self.kinds else "hoses.kind")
+        overrides = {f: getattr(self, f) for f in _CABLE_OVERRIDES if getattr(self, f) is not None}
+        return replace(base, **overrides) if overrides else base
 
     def _validate(self) -> None:
         if not isinstance(self.count, int) or not 1 <= self.count <= 8:
             raise ConfigError("hoses.count", f"1 to 8 hoses are supported, got {self.count!r}")
         check_range("hoses.length", self.length, *HOSE_LENGTH)
-        check_positive("hoses.radius", self.radius)
-        check_number("hoses.radius", self.radius, hi=0.05)
-        check_positive("hoses.segment_length", self.segment_length)
-        if self.segment_length < 2 * self.radius:
-            raise ConfigError(
-                "hoses.segment_length", f"{self.segment_length} is shorter than the hose diameter"
-            )
-        n = self.length[1] / self.segment_length
-        if n > MAX_HOSE_VERTICES:
-            raise ConfigError(
-                "hoses.segment_length",
-                f"{self.segment_length} m makes {n:.0f} vertices of a {self.length[1]} m hose "
-                f"(at most {MAX_HOSE_VERTICES})",
-            )
-        spacing = min_vertex_spacing(self.length, self.segment_length)
-        if spacing < 2 * self.radius * (1 + 1e-6):  # MuJoCo: spacing > diameter
-            raise ConfigError(
-                "hoses.length",
-                f"a hose of {self.length[0]} to {self.length[1]} m gets vertices {spacing:.4g} m "
-                f"apart, not more than its diameter {2 * self.radius:.4g} m (make the hoses longer, "
-                "the segments longer or the radius smaller)",
-            )
-        check_range("hoses.young", self.young, lo=1e-9, hi=1e12)
-        if not 0 <= self.poisson < 0.5:
-            raise ConfigError("hoses.poisson", f"must be in [0, 0.5), got {self.poisson}")
-        check_positive("hoses.mass_per_metre", self.mass_per_metre)
-        check_positive("hoses.damping", self.damping, allow_zero=True)
+        cable_kind(self.kind, "hoses.kind")
+        for i, name in enumerate(self.kinds):
+            cable_kind(name, f"hoses.kinds[{i}]")
+        for name in self.used_kinds():
+            self._validate_cable(self._resolve(name))
         if not 0 <= self.both_ends_probability <= 1:
             raise ConfigError("hoses.both_ends_probability", "must be in [0, 1]")
-        if not self.colors:
-            raise ConfigError("hoses.colors", "need at least one colour")
-        for i, c in enumerate(self.colors):
-            for k, v in enumerate(check_vector(f"hoses.colors[{i}]", c, 3)):
-                check_number(f"hoses.colors[{i}][{k}]", v, 0.0, 1.0)
-        check_number("hoses.color_jitter", self.color_jitter, 0.0, 1.0)
-        check_positive("hoses.friction", self.friction, allow_zero=True)
         if self.section not in ("circle", "box"):
             raise ConfigError("hoses.section", f"must be 'circle' or 'box', got {self.section!r}")
-        if self.section == "box":
+        if self.section == "box" and self.section_size is not None:
             if len(self.section_size) != 2 or min(self.section_size) <= 0:
                 raise ConfigError(
                     "hoses.section_size", f"need two positive half-sizes, got {self.section_size}"
                 )
-            if abs(min(self.section_size) - self.radius) > 1e-12:
-                raise ConfigError(
-                    "hoses.section_size",
-                    f"the smaller half-size {min(self.section_size)} must equal hoses.radius "
-                    f"{self.radius} (MuJoCo collides a box rod as a capsule of that radius)",
-                )
+            for name in self.used_kinds():
+                radius = self._resolve(name).radius
+                if abs(min(self.section_size) - radius) > 1e-12:
+                    raise ConfigError(
+                        "hoses.section_size",
+                        f"the smaller half-size {min(self.section_size)} must equal the radius "
+                        f"{radius} of the {name} cables (MuJoCo collides a box rod as a capsule "
+                        "of that radius)",
+                    )
+
+    def _validate_cable(self, c: CableKind) -> None:
+        """Check one resolved kind; an overridden value is named by its field, a preset's by
+        the kind."""
+
+        def name(f: str) -> str:
+            return f"hoses.{f}" if getattr(self, f) is not None else f"hoses.kind {c.name!r}: {f}"
+
+        check_positive(name("radius"), c.radius)
+        check_number(name("radius"), c.radius, hi=0.05)
+        check_positive(name("segment_length"), c.segment_length)
+        if c.segment_length < 2 * c.radius:
+            raise ConfigError(
+                name("segment_length"),
+                f"{c.segment_length} is shorter than the cable diameter {2 * c.radius}",
+            )
+        n = self.length[1] / c.segment_length
+        if n > MAX_HOSE_VERTICES:
+            raise ConfigError(
+                name("segment_length"),
+                f"{c.segment_length} m makes {n:.0f} vertices of a {self.length[1]} m cable "
+                f"(at most {MAX_HOSE_VERTICES})",
+            )
+        spacing = min_vertex_spacing(self.length, c.segment_length)
+        if spacing < 2 * c.radius * (1 + 1e-6):  # MuJoCo: spacing > diameter
+            raise ConfigError(
+                "hoses.length",
+                f"a {c.name} of {self.length[0]} to {self.length[1]} m gets vertices "
+                f"{spacing:.4g} m apart, not more than its diameter {2 * c.radius:.4g} m (make "
+                "the cables longer, the segments longer or the radius smaller)",
+            )
+        check_range(name("young"), c.young, lo=1e-9, hi=1e12)
+        if not 0 <= c.poisson < 0.5:
+            raise ConfigError(name("poisson"), f"must be in [0, 0.5), got {c.poisson}")
+        check_positive(name("mass_per_metre"), c.mass_per_metre)
+        check_positive(name("damping"), c.damping, allow_zero=True)
+        if not c.colors:
+            raise ConfigError(name("colors"), "need at least one colour")
+        for i, rgb in enumerate(c.colors):
+            for k, v in enumerate(check_vector(f"{name('colors')}[{i}]", rgb, 3)):
+                check_number(f"{name('colors')}[{i}][{k}]", v, 0.0, 1.0)
+        check_number(name("color_jitter"), c.color_jitter, 0.0, 1.0)
+        check_positive(name("friction"), c.friction, allow_zero=True)
+
+
+#: The HoseConfig fields that override a kind's parameter of the same name.
+_CABLE_OVERRIDES = (
+    "radius",
+    "segment_length",
+    "young",
+    "poisson",
+    "mass_per_metre",
+    "damping",
+    "colors",
+    "color_jitter",
+    "friction",
+)
 
 
 @dataclass(frozen=True)

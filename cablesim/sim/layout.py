@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cablesim.cables import GARDEN_HOSE, CableKind
 from cablesim.seeding import stream
 from cablesim.sim.config import SceneConfig, hose_vertex_count
 
@@ -38,10 +39,19 @@ class HoseSpec:
     ends: tuple[int, ...]  # connector indices
     bulge: float  # metres in front of the connector tips
     floor: float  # height at which the part that reaches the table lies
+    cable: CableKind = GARDEN_HOSE  # its kind's parameters, with the config's overrides
 
     @property
     def both_ends(self) -> bool:
         return len(self.ends) == 2
+
+    @property
+    def kind(self) -> str:
+        return self.cable.name
+
+    @property
+    def radius(self) -> float:
+        return self.cable.radius
 
 
 @dataclass(frozen=True)
@@ -65,21 +75,39 @@ def layout_rng(cfg: SceneConfig) -> np.random.Generator:
 
 
 def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
+    """Each cable's kind parameters, length, stiffness, colour, connectors and start-shape
+    offsets, drawn from the layout stream.  Cables of one kind draw exactly what the hoses
+    drew before kinds existed (the same numbers from the same stream); mixed kinds space the
+    start shapes by the thickest cable."""
     h = cfg.hoses
+    cables = [h.cable(i) for i in range(h.count)]
     rng = layout_rng(cfg)
     free = list(range(len(cfg.board.connectors)))
-    colour_order = rng.permutation(len(h.colors))
+    colour_order = rng.permutation(max(len(c.colors) for c in cables))
     specs = []
     lengths = rng.uniform(h.length[0], h.length[1], h.count)
-    youngs = np.exp(rng.uniform(np.log(h.young[0]), np.log(h.young[1]), h.count))
+    ranges = {c.young for c in cables}
+    if len(ranges) == 1:
+        (lo, hi) = ranges.pop()
+        youngs = np.exp(rng.uniform(np.log(lo), np.log(hi), h.count))
+    else:
+        u = rng.random(h.count)
+        youngs = np.array(
+            [
+                np.exp(np.log(c.young[0]) + (np.log(c.young[1]) - np.log(c.young[0])) * u[i])
+                for i, c in enumerate(cables)
+            ]
+        )
     bulge_rank = rng.permutation(h.count)
+    r_max = max(c.radius for c in cables)
     for i in range(h.count):
+        cable = cables[i]
         a = free.pop(int(rng.integers(0, len(free))))
         ends: tuple[int, ...] = (a,)
         want_both = rng.random() < h.both_ends_probability
         rank = int(bulge_rank[i])
-        bulge = 0.012 + (2.4 * h.radius + 0.004) * rank
-        floor = h.radius + 0.004 + 2.6 * h.radius * rank
+        bulge = 0.012 + (2.4 * r_max + 0.004) * rank
+        floor = cable.radius + 0.004 + 2.6 * r_max * rank
         if want_both:
             pa = attach_point(cfg, a)
             # side by side (a hose cannot hang as a loop between two connectors one above the
@@ -101,9 +129,11 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
                 b = ok[int(rng.integers(0, len(ok)))]
                 free.remove(b)
                 ends = (a, b)
-        base = np.array(h.colors[int(colour_order[i % len(colour_order)])], float)
-        rgb = np.clip(base + rng.uniform(-h.color_jitter, h.color_jitter, 3), 0, 1)
-        n_vert = hose_vertex_count(float(lengths[i]), h.segment_length)
+        palette = cable.colors
+        base = np.array(palette[int(colour_order[i % len(colour_order)]) % len(palette)], float)
+        jitter = cable.color_jitter
+        rgb = np.clip(base + rng.uniform(-jitter, jitter, 3), 0, 1)
+        n_vert = hose_vertex_count(float(lengths[i]), cable.segment_length)
         specs.append(
             HoseSpec(
                 index=i,
@@ -113,8 +143,9 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
                 rgb=(float(rgb[0]), float(rgb[1]), float(rgb[2])),
                 young=float(youngs[i]),
                 ends=ends,
-                bulge=0.012 + (2.4 * h.radius + 0.004) * rank,
-                floor=h.radius + 0.004 + 2.6 * h.radius * rank,
+                bulge=bulge,
+                floor=floor,
+                cable=cable,
             )
         )
     return specs

@@ -91,10 +91,11 @@ def pick_segment(
     min_end_distance: float = 0.2,
     max_tries: int = 40,
 ) -> PickedSegment:
-    """A random graspable visible segment of ``hose`` in the camera's current image."""
-    cfg = config or InteractionConfig()
+    """A random graspable visible segment of ``hose`` in the camera's current image, the
+    grasp fitted to that hose's diameter where ``config`` leaves it open."""
     if not 0 <= hose < len(world.hoses):
         raise InputError(f"hose {hose} does not exist (the scene has {len(world.hoses)})")
+    cfg = (config or InteractionConfig()).fitted(2 * world.hoses[hose].spec.radius)
     image = camera.capture()
     labels = camera.render_labels()  # type: ignore[attr-defined]
     depth, K = image.depth, image.intrinsics
@@ -260,8 +261,8 @@ def gripper_obstruction(
 
     g = grasp_pose(np.asarray(centre, float), axis, np.asarray(approach, float))
     R = g.rotation
-    pad = world.cfg.hoses.radius + margin
     for i in range(len(world.hoses)):
+        pad = world.hoses[i].spec.radius + margin
         pts = _densify(world.hose_vertices(i), 0.005)
         if i == hose:
             if arc is None:

@@ -107,6 +107,14 @@ class SimSession(Session):
     def build(cls, config: EpisodeConfig, world: Any = None, camera: Any = None) -> SimSession:
         return cls(config, world, camera)
 
+    def cable_diameter(self) -> float | None:
+        """The diameter of the hose of interest (of the thickest cable while none is drawn),
+        as its cable kind gives it."""
+        hoses = self.cfg.scene.hoses
+        if self.hose is None:
+            return hoses.max_diameter()
+        return 2 * hoses.cable(int(self.hose)).radius
+
     def _assemble(self, world: Any, camera: Any = None) -> None:
         """Robot, camera, truth, perturbation and clock on ``world`` (reset)."""
 
@@ -202,7 +210,7 @@ class SimSession(Session):
         if hose is not None:
             self.hose = hose
         hose = self.draw_hose()
-        icfg = interaction or self.cfg.interaction
+        icfg = self.interaction_config(interaction)
         return pick_segment(self.world, self.robot, self.camera, hose, self.rng, icfg)
 
     def evaluator(self):
@@ -348,7 +356,8 @@ def choose_start(
             why.append(f"hose {h} crosses no other hose")
             continue
         try:
-            picked = pick_segment(world, robot, camera, h, rng, cfg.interaction)
+            icfg = cfg.interaction.fitted(2 * world.hoses[h].spec.radius)
+            picked = pick_segment(world, robot, camera, h, rng, icfg)
         except NoGraspableSegmentError as e:
             for r, c in e.reasons.items():
                 reasons[r] = reasons.get(r, 0) + c

@@ -44,7 +44,7 @@ _KV_OVER_KP = 0.1
 
 class SimWorld(Protocol):
     """What :class:`SimPanda` needs from the simulated world.  A world that also has
-    ``hoses``, ``cfg.hoses.radius`` and ``hose_vertices(i)`` (``cablesim.sim.world.World``) gets
+    ``hoses`` (each with ``spec.radius``) and ``hose_vertices(i)`` (``cablesim.sim.world.World``) gets
     its hoses planned around (``SimPandaConfig.avoid_hoses``)."""
 
     model: mujoco.MjModel
@@ -148,16 +148,13 @@ class SimPanda(ArmModelChecks, Robot):
             ] == 0
         base_pos, base_quat = world.panda_base
         capsules: list[float] = []  # half rest length of every hose edge
+        radii: list[float] = []  # and the radius of its cable, with the clearance
         hoses = getattr(world, "hoses", ()) if self.config.avoid_hoses else ()
         for h in hoses:
             capsules += [0.5 * h.spec.length / (h.n_vertices - 1)] * (h.n_vertices - 1)
-        radius = world.cfg.hoses.radius if hoses else 0.0
+            radii += [h.spec.radius + self.config.hose_clearance] * (h.n_vertices - 1)
         self.arm = ArmModel(
-            base_pos,
-            base_quat,
-            obstacles,
-            hose_capsules=capsules,
-            hose_radius=radius + self.config.hose_clearance,
+            base_pos, base_quat, obstacles, hose_capsules=capsules, hose_radius=radii
         )
         self._closed = False  # the fingers were closed (grasp) and not opened since
         self._vertex_bodies = np.unique(m.flex_vertbodyid[m.flex_vertbodyid > 0])

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from cablesim.cables import CableKind
 from cablesim.errors import PhysicsDivergedError
 from cablesim.panda.model import attach_panda, set_arm
 from cablesim.panda.visuals import add_mesh_visuals_same_view
@@ -119,6 +120,34 @@ def _lighting(cfg: SceneConfig) -> dict[str, str]:
     }
 
 
+def cable_xml(
+    name: str,
+    cable: CableKind,
+    young: float,
+    n_vertices: int,
+    spacing: float,
+    centre: np.ndarray,
+    quat: str,
+    rgb: Sequence[float],
+    mass: float,
+    section: str = "",
+    inner: str = "",
+) -> str:
+    """The MJCF ``flexcomp`` of one cable: a straight rod of ``n_vertices`` along its grid x
+    axis (turned by ``quat``), centred on ``centre``, with ``cable``'s radius, Poisson ratio
+    and friction and the drawn ``young``; ``inner`` goes inside (e.g. a ``pin``)."""
+    c = cable
+    return f"""
+    <flexcomp name="{name}" type="grid" count="{n_vertices} 1 1" spacing="{spacing:.9g} 1 1"
+              pos="{_fmt(centre)}" quat="{quat}" dim="1" dof="full"
+              radius="{c.radius}" rgba="{_fmt(rgb)} 1" mass="{mass:.6g}">
+      <edge equality="true" solimp="0.99 0.999 0.001" solref="0.004 1" damping="0"/>
+      <elasticity young="{young:.6g}" poisson="{c.poisson}" damping="0.0005"{section}/>
+      <contact condim="3" solref="0.01 1" solimp="0.95 0.99 0.001" friction="{c.friction} 0.005 0.0001"
+               selfcollide="none"/>{inner}
+    </flexcomp>"""
+
+
 def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     b, h = cfg.board, cfg.hoses
     R = look_at_frame(cam.position, cam.look_at)
@@ -135,9 +164,6 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
             f'<geom name="connector{i}" type="mesh" mesh="male" pos="{b.x:.6g} {y:.6g} {z:.6g}" '
             f'quat="0 0.70710678 0 0.70710678" material="brass" contype="0" conaffinity="0"/>'
         )
-    section = ""
-    if h.section == "box":
-        section = f' section="box" sectionsize="{_fmt(h.section_size)}"'
     light = _lighting(cfg)
     couplings, flexes, equalities = [], [], []
     for s in hoses:
@@ -152,18 +178,28 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
             )
         top = start_shape(cfg, s)[0]
         spacing = s.length / (s.n_vertices - 1)
-        mass = h.mass_per_metre * s.length
+        c = s.cable
+        mass = c.mass_per_metre * s.length
+        section = ""
+        if h.section == "box":
+            size = h.section_size or (c.radius, c.radius)
+            section = f' section="box" sectionsize="{_fmt(size)}"'
         # straight rod hanging from its first end: grid x axis -> world -z
         centre = top - np.array([0, 0, spacing * (s.n_vertices - 1) / 2])
-        flexes.append(f"""
-    <flexcomp name="{s.name}" type="grid" count="{s.n_vertices} 1 1" spacing="{spacing:.9g} 1 1"
-              pos="{_fmt(centre)}" quat="0.70710678 0 0.70710678 0" dim="1" dof="full"
-              radius="{h.radius}" rgba="{_fmt(s.rgb)} 1" mass="{mass:.6g}">
-      <edge equality="true" solimp="0.99 0.999 0.001" solref="0.004 1" damping="0"/>
-      <elasticity young="{s.young:.6g}" poisson="{h.poisson}" damping="0.0005"{section}/>
-      <contact condim="3" solref="0.01 1" solimp="0.95 0.99 0.001" friction="{h.friction} 0.005 0.0001"
-               selfcollide="none"/>
-    </flexcomp>""")
+        flexes.append(
+            cable_xml(
+                s.name,
+                c,
+                s.young,
+                s.n_vertices,
+                spacing,
+                centre,
+                "0.70710678 0 0.70710678 0",
+                s.rgb,
+                mass,
+                section,
+            )
+        )
         # Ends are held by connect equalities rather than pinned: a pinned vertex cannot give
         # way, and contacts on the edge next to it chatter (measured: 20-100 mm/s forever).
         held = [(f"{s.name}_start", 0)]
@@ -222,12 +258,15 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
 </mujoco>"""
 
 
-def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose], damping: float) -> None:
-    """Velocity damping on every hose dof (air drag and the hose's internal losses)."""
-    names = tuple(h.spec.name + "_" for h in hoses)
+def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose]) -> None:
+    """Velocity damping on every hose dof (air drag and the cable's internal losses), the
+    cable kind's ``damping``."""
+    by_name = {h.spec.name + "_": h.spec.cable.damping for h in hoses}
+    names = tuple(by_name)
     for j in range(model.njnt):
         body = model.body(model.jnt_bodyid[j]).name
         if body.startswith(names):
+            damping = next(d for n, d in by_name.items() if body.startswith(n))
             adr = model.jnt_dofadr[j]
             if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
                 model.dof_damping[adr] = damping
@@ -318,7 +357,7 @@ class World:
             start = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, f"{s.name}_start")
             bodies = model.flex_vertbodyid[adr : adr + num].copy()
             hoses.append(Hose(s, fid, adr, num, bodies, start, eq))
-        _damp_hoses(model, hoses, cfg.hoses.damping)
+        _damp_hoses(model, hoses)
         world = cls(cfg, spec, model, hoses, cam, panda, panda_base)
         try:
             world._set_start_shapes()

@@ -21,6 +21,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cablesim.cables import DEFAULT_KIND, cable_kind
 from cablesim.config import Config, to_dict
 from cablesim.errors import ConfigError, InputError
 from cablesim.jobs import Job
@@ -66,12 +67,14 @@ class SceneSize(Config):
     height: int = 480
     hoses: int = 4
     periods: int = 3  # K_p
+    cable: str = DEFAULT_KIND  # the kind of every cable (cablesim.cables)
 
     def _validate(self) -> None:
         for name in ("width", "height", "hoses", "periods"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"scene.{name}", f"must be a positive integer, got {v!r}")
+        cable_kind(self.cable, "scene.cable")
 
 
 @dataclass(frozen=True)
@@ -170,7 +173,10 @@ class ThesisConfig(Config):
         return range(*(self.clip_validation if split == "validation" else self.clip_test))
 
     def _scene(self) -> dict:
-        return to_dict(self.scene)
+        scene = to_dict(self.scene)
+        if scene["cable"] == DEFAULT_KIND:  # the jobs of runs made before kinds existed
+            del scene["cable"]
+        return scene
 
     def interaction_jobs(self) -> list[Job]:
         """One job per scene of both splits and perturbation setting; every flow and method

@@ -254,12 +254,13 @@ def twin_episode(
         )
         truth = TwinTruth(twin)
         t1 = time.perf_counter()
+        interaction = cfg.interaction.fitted(2 * cfg.scene.hoses.cable(hose).radius)
         result = run_interaction(
             robot,
             camera,
             clock,
             picked.mask,
-            cfg.interaction,
+            interaction,
             truth=truth,
             options=InteractionOptions(say=say, hose=hose, park=twin.park),
         )
@@ -268,7 +269,7 @@ def twin_episode(
         twin.check()
         perceived = Perceived()
         if result.success and result.stream is not None:
-            reachable = grasp_reachability(robot, twin.T_world_camera, cfg.interaction)
+            reachable = grasp_reachability(robot, twin.T_world_camera, interaction)
             perceived = perceive(
                 result.stream,
                 hose,
@@ -340,7 +341,7 @@ def sim_episode(
         if res.success and res.stream is not None:
             session = ep.session
             reachable = grasp_reachability(
-                session.robot, session.T_world_camera, session.cfg.interaction
+                session.robot, session.T_world_camera, session.interaction_config()
             )
             perceived = perceive(
                 res.stream,

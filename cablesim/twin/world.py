@@ -171,7 +171,7 @@ class TwinWorld:
             self._samplers.joints,
             self._samplers.gripper,
             extrapolate=extrapolate,
-            hose_diameter=2.0 * float(world.cfg.hoses.radius),
+            hose_diameter=float(world.cfg.hoses.max_diameter()),
             gripper_speed=gripper_speed,
             settle_time=settle_time,
             finger_rest_speed=finger_rest_speed,

@@ -44,7 +44,7 @@ def episode() -> Iterator[TwinEpisode]:
     # motion limits are checked and logged but do not abort: on a shared CPU lost control
     # cycles become velocity-discontinuity reflexes (test_franky_panda tests the reflexes)
     server = FrankaSimServer(
-        object_width=2 * CONFIG.scene.hoses.radius, enforce_motion_limits=False, lifetime=400
+        object_width=CONFIG.scene.hoses.max_diameter(), enforce_motion_limits=False, lifetime=400
     )
     try:
         server.start()

@@ -382,7 +382,7 @@ def test_the_simulated_arm_plans_around_the_hoses_while_the_gripper_is_open() ->
                 g = arm.model.geom(f"hose/{k}").id
                 np.testing.assert_allclose(arm.data.geom_xpos[g], 0.5 * (a + b), atol=1e-9)
                 assert arm.model.geom_size[g, 0] == pytest.approx(
-                    world.cfg.hoses.radius + robot.config.hose_clearance
+                    world.hoses[i].spec.radius + robot.config.hose_clearance
                 )
                 k += 1
         robot.grasp()

@@ -73,7 +73,7 @@ def test_layout_is_seeded_and_within_ranges(seed: int) -> None:
         pts = start_shape(cfg, s)
         seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
         assert seg.sum() == pytest.approx(s.length, rel=0.02)
-        assert pts[:, 2].min() >= cfg.hoses.radius  # nothing starts inside the table
+        assert pts[:, 2].min() >= cfg.hoses.cable(0).radius  # nothing starts inside the table
     assert sample_hoses(_cfg(seed=seed + 100)) != a
 
 
@@ -86,7 +86,7 @@ def test_start_shapes_do_not_intersect() -> None:
                 d = np.linalg.norm(shapes[i][:, None] - shapes[j][None], axis=2)
                 # at most a shallow overlap (where one hose passes right in front of another's
                 # coupling) that contacts push apart; never one rod through another
-                assert d[1:-1, 1:-1].min() > 1.3 * cfg.hoses.radius, (seed, i, j)
+                assert d[1:-1, 1:-1].min() > 1.3 * cfg.hoses.cable(0).radius, (seed, i, j)
 
 
 @pytest.fixture(scope="module")
