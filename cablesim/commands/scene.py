@@ -20,6 +20,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from cablesim.cables import GARDEN_HOSE
 from cablesim.commands._args import (
     SCENE_FLAGS,
     add_scene_arguments,
@@ -51,9 +52,12 @@ from cablesim.viz import (
 
 PULL_DISTANCE = 0.03  # m
 PULL_TIME = 0.5  # s
+# the spring on the default hose's vertex; a cable of another kind gets it scaled by its
+# vertex's mass, the same acceleration (6 N on a rope's 1.3 g vertex tore the rope apart)
 PULL_STIFFNESS = 300.0  # N/m
 PULL_DAMPING = 4.0  # N s/m
 PULL_MAX_FORCE = 6.0  # N
+PULL_VERTEX_MASS = GARDEN_HOSE.mass_per_metre * GARDEN_HOSE.segment_length  # kg, nominal
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -83,16 +87,23 @@ def pull_hose(world, hose_index: int, distance: float, duration: float) -> dict:
     hose = world.hoses[hose_index]
     k = hose.n_vertices // 2
     body = int(hose.vertex_bodies[k])
+    cable = hose.spec.cable
+    scale = cable.mass_per_metre * cable.segment_length / PULL_VERTEX_MASS  # 1 for the hose
+    stiffness, damping, max_force = (
+        scale * PULL_STIFFNESS,
+        scale * PULL_DAMPING,
+        scale * PULL_MAX_FORCE,
+    )
     start = d.xpos[body].copy()
     target = start + np.array([0.0, distance, 0.0])
     n_steps = int(round(duration / m.opt.timestep))
     for _ in range(n_steps):
         vel = np.zeros(6)
         mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, vel, 0)
-        f = PULL_STIFFNESS * (target - d.xpos[body]) - PULL_DAMPING * vel[3:]
+        f = stiffness * (target - d.xpos[body]) - damping * vel[3:]
         norm = np.linalg.norm(f)
-        if norm > PULL_MAX_FORCE:
-            f *= PULL_MAX_FORCE / norm
+        if norm > max_force:
+            f *= max_force / norm
         d.xfrc_applied[body, :3] = f
         world.step(1)
     return {
