@@ -101,10 +101,6 @@ class _Scheduling:
             self._set(self.caller)
 
 
-#: Tries of one gripper state read (``FrankyPanda.gripper_opening``).
-GRIPPER_READ_ATTEMPTS = 3
-
-
 def _column_major(T: np.ndarray) -> list[float]:
     return [float(v) for v in np.asarray(T, dtype=float).T.reshape(16)]
 
@@ -186,7 +182,6 @@ class FrankyPanda(ArmModelChecks, Robot):
         self.arm = ArmModel(base.position, base.quaternion, obstacles)
 
         self._scheduling = _Scheduling()
-        self.gripper_read_retries = 0  # gripper state reads that timed out and were read again
         if robot is None:
             config = fr.RealtimeConfig.Enforce if realtime else fr.RealtimeConfig.Ignore
             robot = fr.Robot(host, realtime_config=config)
@@ -235,22 +230,7 @@ class FrankyPanda(ArmModelChecks, Robot):
 
     @property
     def gripper_opening(self) -> float:
-        """The fingers' opening (m), read from the gripper's state stream.  A read is a query,
-        never a motion, so one that libfranka's UDP receive timed out on is read again, up to
-        :data:`GRIPPER_READ_ATTEMPTS` times (counted in ``gripper_read_retries``): franka-sim's
-        gripper thread, starved on a host loaded three times over, once went over libfranka's
-        1 s without a state in the middle of a twin interaction.  After such a stall franky
-        sometimes raises a bare ``RuntimeError("Net Exception")`` instead, read again alike."""
-        if self.gripper is None:
-            return float("nan")
-        for attempt in range(GRIPPER_READ_ATTEMPTS):
-            try:
-                return float(self.gripper.width)
-            except (self._franky.NetworkException, RuntimeError):  # franky: "Net Exception"
-                if attempt == GRIPPER_READ_ATTEMPTS - 1:
-                    raise
-                self.gripper_read_retries += 1
-        raise AssertionError("unreachable")
+        return float(self.gripper.width) if self.gripper is not None else float("nan")
 
     def to_base(self, pose: Pose) -> Pose:
         """A world-frame pose in the robot base frame."""
