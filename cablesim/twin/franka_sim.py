@@ -486,12 +486,23 @@ class FrankaSimServer:
         """Every motion-limit violation the server's cycle monitor logged so far."""
         return parse_cycle_violations(self.log_text())
 
-    def running_clock(self) -> str:
+    def running_clock(self, timeout: float = 10.0) -> str:
         """The clock the server reported it runs on: ``"lockstep"`` or ``"realtime"`` (also
-        where lockstep was asked for but franka-sim's internals did not allow it)."""
-        text = self.log_text()
-        lockstep = "cablesim-clock: lockstep (" in text and "physics in lockstep" in text
-        return "lockstep" if lockstep else "realtime"
+        where lockstep was asked for but franka-sim's internals did not allow it).  The
+        physics thread reports lockstep when it starts, which can come after "Server ready"
+        on a loaded host (a robot test once read the log in between and saw no lockstep), so
+        a server that installed lockstep is given up to ``timeout`` s to report it."""
+        deadline = time.monotonic() + timeout
+        while True:
+            text = self.log_text()
+            installed = "cablesim-clock: lockstep (" in text
+            if installed and "physics in lockstep" in text:
+                return "lockstep"
+            if not installed or time.monotonic() > deadline:
+                return "realtime"
+            if self.proc is not None and self.proc.poll() is not None:
+                return "realtime"
+            time.sleep(0.05)
 
     def stop(self) -> None:
         """Interrupt the server (SIGINT, then SIGKILL after ``stop_timeout``)."""

@@ -119,3 +119,26 @@ def test_a_port_left_in_time_wait_is_free_and_a_listening_one_is_not() -> None:
             conn.close()  # the server's side closes first: its port goes to TIME_WAIT
             client.recv(1)
     assert ports_free()
+
+
+def test_the_clock_is_read_once_the_physics_thread_reports_it(tmp_path) -> None:
+    """ "Server ready" can be logged before the physics thread reports lockstep (a loaded host
+    once showed a robot test that gap); ``running_clock`` waits for the report."""
+    import threading
+
+    server = FrankaSimServer()
+    server.log = tmp_path / "server.log"
+    server.log.write_text("cablesim-clock: lockstep (wait 0.250 s)\nServer ready for new client\n")
+
+    def physics_starts() -> None:
+        with server.log.open("a") as f:
+            f.write("cablesim-clock: physics in lockstep\n")
+
+    later = threading.Timer(0.5, physics_starts)
+    later.start()
+    try:
+        assert server.running_clock() == "lockstep"
+    finally:
+        later.join()
+    server.log.write_text("Server ready for new client\n")  # franka-sim's own clock
+    assert server.running_clock(timeout=0.1) == "realtime"
