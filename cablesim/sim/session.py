@@ -210,7 +210,7 @@ class SimSession(Session):
         if hose is not None:
             self.hose = hose
         hose = self.draw_hose()
-        icfg = self.interaction_config(interaction)
+        icfg = interaction or self.cfg.interaction  # pick_segment fits it to the hose
         return pick_segment(self.world, self.robot, self.camera, hose, self.rng, icfg)
 
     def evaluator(self):
@@ -356,8 +356,7 @@ def choose_start(
             why.append(f"hose {h} crosses no other hose")
             continue
         try:
-            icfg = cfg.interaction.fitted(2 * world.hoses[h].spec.radius)
-            picked = pick_segment(world, robot, camera, h, rng, icfg)
+            picked = pick_segment(world, robot, camera, h, rng, cfg.interaction)
         except NoGraspableSegmentError as e:
             for r, c in e.reasons.items():
                 reasons[r] = reasons.get(r, 0) + c
