@@ -20,7 +20,9 @@ collisions.  A target that fails this check returns ``MoveResult(False, reason)`
 ``ControlException`` carrying a reflex, e.g. a collision or a joint limit; ``CommandException``;
 ``InvalidOperationException``) also returns ``MoveResult(False, reason)``, after
 ``recover_from_errors()``, with no outcome of its own (the step that asked for it names it).
-Only a lost connection (``NetworkException``) raises.
+Only a lost connection (``NetworkException``) raises.  Connecting is retried (at most
+``connect_attempts`` times, each warned and listed in ``connect_retries``) when libfranka's first
+state does not arrive in time: nothing has moved then.
 
 Speeds.  franky scales its velocity, acceleration and jerk limits by a relative dynamics
 factor.  ``move_to``'s ``speed`` and ``angular_speed`` become the velocity factor
@@ -37,6 +39,7 @@ from __future__ import annotations
 import math
 import os
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any
@@ -147,6 +150,7 @@ class FrankyPanda(ArmModelChecks, Robot):
         flange_T_tcp: np.ndarray = FLANGE_T_TCP,
         robot: Any = None,
         gripper: Any = None,
+        connect_attempts: int = 3,
     ):
         if not 0.0 < dynamics_factor <= 1.0:
             raise ValueError(f"dynamics_factor must be in (0, 1], got {dynamics_factor}")
@@ -182,9 +186,13 @@ class FrankyPanda(ArmModelChecks, Robot):
         self.arm = ArmModel(base.position, base.quaternion, obstacles)
 
         self._scheduling = _Scheduling()
+        if not isinstance(connect_attempts, int) or connect_attempts < 1:
+            raise ConfigError("connect_attempts", f"must be >= 1, got {connect_attempts!r}")
+        self.connect_attempts = connect_attempts
+        self.connect_retries: list[str] = []  # one line per failed attempt that was retried
         if robot is None:
             config = fr.RealtimeConfig.Enforce if realtime else fr.RealtimeConfig.Ignore
-            robot = fr.Robot(host, realtime_config=config)
+            robot = self._connect("arm", lambda: fr.Robot(host, realtime_config=config))
             self._scheduling.connected()
         self.robot: franky.Robot = robot
         self.robot.relative_dynamics_factor = 1.0  # per-motion factors carry the scaling
@@ -194,8 +202,31 @@ class FrankyPanda(ArmModelChecks, Robot):
         self._v_max = float(self.robot.translation_velocity_limit.get())
         self._w_max = float(self.robot.rotation_velocity_limit.get())
         if gripper is None:
-            gripper = fr.Gripper(host)
+            gripper = self._connect("gripper", lambda: fr.Gripper(host))
         self.gripper: franky.Gripper | None = gripper or None
+
+    def _connect(self, what: str, make: Any) -> Any:
+        """``make()``, the franky object that connects to the arm or the gripper, tried up to
+        ``connect_attempts`` times.  libfranka waits one second for the first state over UDP
+        after the TCP handshake; a host too loaded to send it in time (measured here: franka-sim
+        beside a full test run on two cores) or a lossy network fails the attempt with
+        ``NetworkException``.  Nothing has moved yet, so a new connection is safe; each retry
+        is warned and listed in ``connect_retries``, and the last attempt's error is raised."""
+        fr = self._franky
+        for attempt in range(1, self.connect_attempts + 1):
+            try:
+                return make()
+            except fr.NetworkException as exc:
+                if attempt == self.connect_attempts:
+                    raise
+                line = (
+                    f"{what} at {self.host}: connection attempt {attempt} of "
+                    f"{self.connect_attempts} failed ({exc}); trying again"
+                )
+                self.connect_retries.append(line)
+                warnings.warn(line, stacklevel=3)
+                time.sleep(0.5)
+        raise AssertionError("unreachable")  # pragma: no cover
 
     def _set_tcp(self) -> None:
         """Make the robot's EE frame the TCP: ``NE_T_EE = F_T_NE^-1 * FLANGE_T_TCP``."""
