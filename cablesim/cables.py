@@ -47,6 +47,11 @@ class CableKind:
     colors: tuple[RGB, ...]  # palette; each cable draws one, jittered by ``color_jitter``
     color_jitter: float
     sources: str  # where the numbers come from (docs/cables.md has the details)
+    # the surface's look (``PATTERNS``): drawn on the cable in its material frame, so it
+    # moves, bends and twists with the cable and the ground-truth flow carries it exactly
+    pattern: str = "solid"
+    pattern_period: float = 0.03  # m: stripe spacing, marking repeat, strand lay length
+    pattern_color: RGB | None = None  # None: the pattern's own contrast with the cable colour
 
     def bending_stiffness(self) -> tuple[float, float]:
         """EI range (N m^2) the ``young`` range gives at ``radius``."""
@@ -61,12 +66,44 @@ class CableKind:
             f"EI {ei[0]:.2g}-{ei[1]:.2g} N m^2  (E {self.young[0]:.3g}-{self.young[1]:.3g} Pa)  "
             f"{1e3 * self.mass_per_metre:.0f} g/m  friction {self.friction:g}  "
             f"damping {self.damping:g} N s/m  segment {1e3 * self.segment_length:.0f} mm  "
-            f"{len(self.colors)} colours: {self.summary}"
+            f"{self.pattern}  {len(self.colors)} colours: {self.summary}"
         )
 
 
 def _grey(v: float) -> RGB:
     return (v, v, v)
+
+
+#: The surface patterns a cable can wear (``CableKind.pattern``, ``hoses.pattern``), each
+#: drawn by :mod:`cablesim.sim.patterns` in the cable's material frame.
+PATTERNS: dict[str, str] = {
+    "solid": "one colour (the hard case for flow: nothing to track along the cable)",
+    "stripes": "rings of the pattern colour across the cable, one per period (a third wide)",
+    "marking": "a printed dash along one side, 0.6 of a period long, once per period",
+    "twisted": "three helical strand grooves, one lay length per period (a laid rope)",
+    "braided": "two strands each way, crossing helices (a braided sleeve or rope)",
+}
+
+
+def check_pattern(name: str, field: str) -> str:
+    """``name`` if it is a pattern; a ConfigError naming ``field`` and the choices otherwise."""
+    if name not in PATTERNS:
+        raise ConfigError(field, f"unknown pattern {name!r} (one of: {', '.join(PATTERNS)})")
+    return name
+
+
+def pattern_color(pattern: str, rgb: RGB, override: RGB | None = None) -> RGB:
+    """The colour ``pattern`` is drawn in on a cable of colour ``rgb``: ``override`` if given;
+    a darker shade of the cable's colour for strands (the shadow between them); otherwise a
+    contrasting one (dark on a light cable, light on a dark one), like print on a sheath."""
+    if override is not None:
+        return override
+    r, g, b = rgb
+    if pattern in ("twisted", "braided"):
+        return (0.45 * r, 0.45 * g, 0.45 * b)
+    if 0.3 * r + 0.59 * g + 0.11 * b > 0.45:
+        return (0.25 * r, 0.25 * g, 0.25 * b)
+    return (0.75 + 0.25 * r, 0.75 + 0.25 * g, 0.75 + 0.25 * b)
 
 
 GARDEN_HOSE = CableKind(
@@ -110,6 +147,8 @@ ELECTRICAL_CABLE = CableKind(
     sources="PVC multicore datasheets (3x1.5 mm^2: 6.2 mm, 64 kg/km; 3x2.5 mm^2: 7.2 mm, "
     "93 kg/km); EI 1.2e-3-5.9e-3 N m^2 estimated from PVC sheath and insulation moduli "
     "(10-60 MPa), checked against MuJoCo's demo cable (EI 2e-3); PVC on wood 0.3-0.6",
+    pattern="marking",
+    pattern_period=0.05,
 )
 
 THIN_WIRE = CableKind(
@@ -159,7 +198,10 @@ ROPE = CableKind(
     color_jitter=0.04,
     sources="polyester rope tables (10 mm: 65 g/m, engineeringtoolbox); EI 1e-4-1e-3 N m^2 "
     "estimated (fibres slipping: 2e-5, twist and friction raise it 10-100x); capstan tests "
-    "of polyester rope on timber 0.36-0.37, rough twisted rope about 0.5",
+    "of polyester rope on timber 0.36-0.37, rough twisted rope about 0.5; lay length of "
+    "three-strand rope about 3.5 diameters",
+    pattern="twisted",
+    pattern_period=0.035,
 )
 
 #: Every kind, by name (the registry ``--cable`` and ``hoses.kind`` choose from).

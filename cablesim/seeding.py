@@ -32,6 +32,7 @@ STREAMS: tuple[str, ...] = (
     "lighting",  # light jitter (LightConfig.jitter)
     "dataset",  # a dataset scene's randomised background, hoses, light and camera
     "dataset_kinds",  # a dataset scene's cable kinds, one per cable
+    "dataset_patterns",  # a dataset scene's cable surface patterns, one per cable
 )
 
 

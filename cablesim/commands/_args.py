@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
-from cablesim.cables import CABLE_KINDS, DEFAULT_KIND
+from cablesim.cables import CABLE_KINDS, DEFAULT_KIND, PATTERNS
 from cablesim.config import ConfigMigrationWarning, flatten, parse_value, replace_paths
 from cablesim.errors import ConfigError, InputError
 from cablesim.panda.description import VISUALS
@@ -33,6 +33,7 @@ SCENE_FLAGS: Mapping[str, str] = {
     "draw": "draw",
     "hoses": "hoses.count",
     "cable": "hoses.kind",
+    "pattern": "hoses.pattern",
     "width": "camera.width",
     "height": "camera.height",
     "robot_visual": "robot.visual",
@@ -186,8 +187,8 @@ def build_config(
         for dest, path in flags.items()
         if getattr(args, dest, None) is not None
     }
-    for path in list(changes):  # --cable KIND: every cable of that kind, none per cable
-        if path == "hoses.kind" or path.endswith(".hoses.kind"):
+    for path in list(changes):  # --cable/--pattern: every cable of that kind, none per cable
+        if path.split(".")[-2:] in (["hoses", "kind"], ["hoses", "pattern"]):
             changes[path + "s"] = ()
     changes.update(values or {})
     changes.update(set_values(args))
@@ -232,6 +233,20 @@ def add_cable_argument(p: argparse.ArgumentParser, default: str = DEFAULT_KIND) 
     )
 
 
+def add_pattern_argument(
+    p: argparse.ArgumentParser, default: str = "the kind's", kind_choice: bool = False
+) -> None:
+    """``--pattern NAME``: every cable wears one surface pattern (``cablesim cables``)."""
+    p.add_argument(
+        "--pattern",
+        choices=(("kind",) if kind_choice else ()) + tuple(PATTERNS),
+        default=None,
+        help=f"the surface pattern of every cable (default {default}"
+        + ("; kind: each cable its kind's" if kind_choice else "")
+        + "; `cablesim cables` lists them)",
+    )
+
+
 def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed") -> None:
     add_config_arguments(p)
     p.add_argument("--seed", type=int, default=None, help=f"{seed_help} (default 0)")
@@ -244,6 +259,7 @@ def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed
     )
     p.add_argument("--hoses", type=int, default=None, help="number of hoses (default 4)")
     add_cable_argument(p)
+    add_pattern_argument(p)
     p.add_argument("--width", type=int, default=None, help="image width (default 640)")
     p.add_argument("--height", type=int, default=None, help="image height (default 480)")
     p.add_argument(

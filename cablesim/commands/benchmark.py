@@ -24,6 +24,7 @@ from pathlib import Path
 from cablesim.commands._args import (
     add_cable_argument,
     add_config_arguments,
+    add_pattern_argument,
     build_config,
     show_config,
 )
@@ -36,6 +37,7 @@ FLAGS = {
     "height": "scene.height",
     "hoses": "scene.hoses",
     "cable": "scene.cable",
+    "pattern": "scene.pattern",
     "periods": "scene.periods",
     "workers": "workers",
     "ray": "ray",
@@ -74,6 +76,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--height", type=int)
     p.add_argument("--hoses", type=int)
     add_cable_argument(p)
+    add_pattern_argument(p)
     p.add_argument("--periods", type=int, help="periods per action (K_p)")
     p.add_argument("--no-explore", action="store_true", help="skip tables 6.8/6.9")
     p.add_argument("--no-clips", action="store_true", help="skip chapter 5")

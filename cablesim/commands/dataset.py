@@ -23,8 +23,8 @@ import argparse
 import json
 from pathlib import Path
 
-from cablesim.cables import CABLE_KINDS
-from cablesim.commands._args import add_cable_argument
+from cablesim.cables import CABLE_KINDS, PATTERNS
+from cablesim.commands._args import add_cable_argument, add_pattern_argument
 from cablesim.errors import ConfigError
 from cablesim.files import OutputLock, write_text
 from cablesim.jobs import Job, execute, load_results, parse_range
@@ -42,6 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--height", type=int, default=480)
     add_cable_argument(p, default="drawn per cable from every kind")
+    add_pattern_argument(p, default="drawn per cable from every pattern", kind_choice=True)
     p.add_argument("--periods", type=int, default=None, help="periods per action (1 clip, 3 mcor)")
     p.add_argument("--quiet", action="store_true")
 
@@ -55,8 +56,10 @@ def dataset_jobs(
     scene: dict,
     periods: int | None = None,
     cable_kinds: tuple[str, ...] = tuple(CABLE_KINDS),
+    cable_patterns: tuple[str, ...] = tuple(PATTERNS),
 ) -> list:
-    """One job per seed; each scene randomised, its cables' kinds drawn from ``cable_kinds``."""
+    """One job per seed; each scene randomised, its cables' kinds drawn from ``cable_kinds``
+    and their patterns from ``cable_patterns`` (empty: each cable its kind's)."""
 
     if layout == "mcor" and split == "train":
         raise ConfigError("--split", "the motion-correlation annotations have validation and test")
@@ -67,7 +70,10 @@ def dataset_jobs(
             "split": split,
             "root": str(Path(root).resolve()),  # worker processes (Ray) have their own cwd
             "scene": scene,
-            "randomize": {"cable_kinds": list(cable_kinds)},
+            "randomize": {
+                "cable_kinds": list(cable_kinds),
+                "cable_patterns": list(cable_patterns),
+            },
             "periods": periods if periods is not None else (1 if layout == "movingcables" else 3),
         }
         if layout == "movingcables":
@@ -86,7 +92,10 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--scenes", "a MovingCables split holds at most 9999 clips")
     scene = {"width": args.width, "height": args.height}
     kinds = (args.cable,) if args.cable is not None else tuple(CABLE_KINDS)
-    jobs = dataset_jobs(args.layout, a, b, args.out, args.split, scene, args.periods, kinds)
+    patterns = {None: tuple(PATTERNS), "kind": ()}.get(args.pattern, (args.pattern,))
+    jobs = dataset_jobs(
+        args.layout, a, b, args.out, args.split, scene, args.periods, kinds, patterns
+    )
     with OutputLock(args.out):  # refused at once while another command writes there
         summary = execute(
             jobs,

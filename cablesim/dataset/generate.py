@@ -65,13 +65,18 @@ def scene_from(params: dict[str, Any]) -> SceneConfig:
         values["hoses.count"] = int(size["hoses"])
     if "cable" in size:
         values["hoses.kind"] = str(size["cable"])
+    if "pattern" in size:
+        values["hoses.pattern"] = str(size["pattern"])
     base = SceneConfig().with_values(values)
     if params.get("randomize", False):
         r = dict(params["randomize"]) if isinstance(params["randomize"], dict) else {}
         if "cable" in size:  # one kind asked for: the randomiser draws no kinds
             r["cable_kinds"] = (str(size["cable"]),)
-        if "cable_kinds" in r:
-            r["cable_kinds"] = tuple(r["cable_kinds"])
+        if "pattern" in size:  # one pattern asked for: the randomiser draws none
+            r["cable_patterns"] = (str(size["pattern"]),)
+        for name in ("cable_kinds", "cable_patterns"):
+            if name in r:
+                r[name] = tuple(r[name])
         return randomize_scene(base.seed, base, Randomization(**r))
     return base
 

@@ -1,6 +1,7 @@
 """Randomised scenes for datasets: background, hose count and colours, lighting and camera pose
-drawn from the seed's ``dataset`` stream, the cable kinds from its ``dataset_kinds`` stream (so
-a scene depends on its seed alone).
+drawn from the seed's ``dataset`` stream, the cable kinds from its ``dataset_kinds`` stream and
+the cables' surface patterns from its ``dataset_patterns`` stream (so a scene depends on its
+seed alone).
 
     scene = randomize_scene(1234, SceneConfig(), Randomization())
 """
@@ -10,7 +11,7 @@ from __future__ import annotations
 import colorsys
 from dataclasses import dataclass
 
-from cablesim.cables import DEFAULT_KIND, cable_kind
+from cablesim.cables import DEFAULT_KIND, cable_kind, check_pattern
 from cablesim.config import Config, check_positive
 from cablesim.errors import ConfigError
 from cablesim.seeding import stream
@@ -31,6 +32,10 @@ class Randomization(Config):
     # ``cablesim dataset`` draws from every kind unless ``--cable`` names one, the default
     # here keeps the jobs of datasets made before kinds existed what they were
     cable_kinds: tuple[str, ...] = (DEFAULT_KIND,)
+    # the surface pattern of each cable, drawn uniformly per cable from these (empty: each
+    # cable wears its kind's; ``cablesim dataset`` draws from every pattern unless
+    # ``--pattern`` names one)
+    cable_patterns: tuple[str, ...] = ()
 
     def _validate(self) -> None:
         for b in self.backgrounds:
@@ -50,6 +55,8 @@ class Randomization(Config):
             raise ConfigError("cable_kinds", "need at least one cable kind")
         for i, name in enumerate(self.cable_kinds):
             cable_kind(name, f"cable_kinds[{i}]")
+        for i, name in enumerate(self.cable_patterns):
+            check_pattern(name, f"cable_patterns[{i}]")
 
 
 def randomize_scene(seed: int, base: SceneConfig, r: Randomization | None = None) -> SceneConfig:
@@ -77,6 +84,13 @@ def randomize_scene(seed: int, base: SceneConfig, r: Randomization | None = None
     else:  # its own stream: the draws above are those of datasets made before kinds existed
         pick = stream(seed, "dataset_kinds").integers(len(kinds), size=int(values["hoses.count"]))
         values["hoses.kinds"] = tuple(kinds[int(k)] for k in pick)
+    patterns = tuple(dict.fromkeys(r.cable_patterns))
+    if len(patterns) == 1:
+        values["hoses.pattern"], values["hoses.patterns"] = patterns[0], ()
+    elif patterns:  # its own stream, as the kinds'
+        count = int(values["hoses.count"])
+        pick = stream(seed, "dataset_patterns").integers(len(patterns), size=count)
+        values["hoses.patterns"] = tuple(patterns[int(k)] for k in pick)
     values["light.jitter"] = float(r.light_jitter)
     values["camera.position_jitter"] = float(r.camera_position_jitter)
     values["camera.look_at_jitter"] = float(r.camera_look_at_jitter)

@@ -38,10 +38,17 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 import numpy as np
 
+from cablesim.cables import pattern_color
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.errors import InputError
 from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT, Intrinsics
 from cablesim.seeding import stream
+from cablesim.sim.patterns import (
+    add_pattern_geoms,
+    fallback_frames,
+    pattern_geom_bound,
+    pattern_pieces,
+)
 from cablesim.sim.sensor import rgb_sensor, stereo_depth
 
 if TYPE_CHECKING:
@@ -160,7 +167,12 @@ class SimCamera(Camera):
         m.vis.quality.offsamples = int(antialias_samples)
         m.vis.quality.numstacks = int(c.sphere_stacks)
         try:
-            self._renderer: mujoco.Renderer | None = mujoco.Renderer(m, self.height, self.width)
+            self._renderer: mujoco.Renderer | None = mujoco.Renderer(
+                m,
+                self.height,
+                self.width,
+                max_geom=10000 + sum(pattern_geom_bound(h.spec) for h in world.hoses),
+            )
         finally:
             m.vis.quality.offsamples, m.vis.quality.numstacks = samples, stacks
         self._option = _camera_option()
@@ -178,6 +190,7 @@ class SimCamera(Camera):
         for i, h in enumerate(world.hoses):
             self._flex_label[h.flex_id] = i
         self._twist_qpos = [self._twist_addresses(h) for h in world.hoses]
+        self._patterned = any(h.spec.cable.pattern != "solid" for h in world.hoses)
 
     # ------------------------------------------------------------------ interface
     @property
@@ -300,9 +313,30 @@ class SimCamera(Camera):
         return self._renderer
 
     def _update_scene(self, option: mujoco.MjvOption | None = None) -> None:
-        self._ctx().update_scene(
-            self.world.data, self.world.camera_id, self._option if option is None else option
-        )
+        option = self._option if option is None else option
+        r = self._ctx()
+        r.update_scene(self.world.data, self.world.camera_id, option)
+        if self._patterned:
+            self._add_patterns(r.scene, option)
+
+    def _add_patterns(self, scene: mujoco.MjvScene, option: mujoco.MjvOption) -> None:
+        """Append the pattern geoms of every patterned cable the option draws (its flex's
+        group is on), in the edges' material frames (:mod:`cablesim.sim.patterns`)."""
+        m, d = self.world.model, self.world.data
+        for i, h in enumerate(self.world.hoses):
+            c = h.spec.cable
+            if c.pattern == "solid" or not option.flexgroup[m.flex_group[h.flex_id]]:
+                continue
+            verts = self.world.hose_vertices(i)
+            twist = d.qpos[self._twist_qpos[i]]
+            frames = self._material_frames(h, verts, twist)
+            if frames is None:
+                frames = fallback_frames(verts, twist)
+            rest = h.spec.length / (h.spec.n_vertices - 1)
+            pieces = pattern_pieces(c.pattern, verts, frames, c.radius, rest, c.pattern_period)
+            if pieces is not None:
+                rgb = pattern_color(c.pattern, h.spec.rgb, c.pattern_color)
+                add_pattern_geoms(scene, pieces, rgb, h.flex_id)
 
     def _render_rgbd(self, depth: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """RGB and (unless ``depth`` is False) metric depth of the current state, from one

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from cablesim.cables import DEFAULT_KIND, CableKind, cable_kind
+from cablesim.cables import DEFAULT_KIND, CableKind, cable_kind, check_pattern
 from cablesim.config import (
     Config,
     check_number,
@@ -143,6 +143,12 @@ class HoseConfig(Config):
     # twist shows in the image (the twist check of the ground-truth flow uses one)
     section: str = "circle"
     section_size: tuple[float, float] | None = None  # None: (radius, radius)
+    # the surface look (``cablesim cables --patterns``): None is the kind's; ``patterns``
+    # gives one per cable (cable i wears ``patterns[i % len(patterns)]``)
+    pattern: str | None = None
+    patterns: tuple[str, ...] = ()
+    pattern_period: float | None = None  # m
+    pattern_color: tuple[float, float, float] | None = None  # None: contrast with the cable
 
     def kind_of(self, i: int) -> str:
         """The kind of cable ``i``."""
@@ -158,7 +164,10 @@ class HoseConfig(Config):
 
     def cable(self, i: int) -> CableKind:
         """The parameters cable ``i`` is built with: its kind's, with this config's overrides."""
-        return self._resolve(self.kind_of(i))
+        c = self._resolve(self.kind_of(i))
+        if self.patterns:
+            c = replace(c, pattern=self.patterns[i % len(self.patterns)])
+        return c
 
     def _resolve(self, name: str) -> CableKind:
         base = cable_kind(name, "hoses.kinds" if self.kinds else "hoses.kind")
@@ -174,6 +183,8 @@ class HoseConfig(Config):
             cable_kind(name, f"hoses.kinds[{i}]")
         for name in self.used_kinds():
             self._validate_cable(self._resolve(name))
+        for i, name in enumerate(self.patterns):
+            check_pattern(name, f"hoses.patterns[{i}]")
         if not 0 <= self.both_ends_probability <= 1:
             raise ConfigError("hoses.both_ends_probability", "must be in [0, 1]")
         if self.section not in ("circle", "box"):
@@ -235,6 +246,16 @@ class HoseConfig(Config):
                 check_number(f"{name('colors')}[{i}][{k}]", v, 0.0, 1.0)
         check_number(name("color_jitter"), c.color_jitter, 0.0, 1.0)
         check_positive(name("friction"), c.friction, allow_zero=True)
+        check_pattern(c.pattern, name("pattern"))
+        check_positive(name("pattern_period"), c.pattern_period)
+        if c.pattern_period < 2 * c.radius:
+            raise ConfigError(
+                name("pattern_period"),
+                f"{c.pattern_period} m is shorter than the cable diameter {2 * c.radius} m",
+            )
+        if c.pattern_color is not None:
+            for k, v in enumerate(check_vector(name("pattern_color"), c.pattern_color, 3)):
+                check_number(f"{name('pattern_color')}[{k}]", v, 0.0, 1.0)
 
 
 #: The HoseConfig fields that override a kind's parameter of the same name.
@@ -248,6 +269,9 @@ _CABLE_OVERRIDES = (
     "colors",
     "color_jitter",
     "friction",
+    "pattern",
+    "pattern_period",
+    "pattern_color",
 )
 
 

@@ -21,7 +21,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cablesim.cables import DEFAULT_KIND, cable_kind
+from cablesim.cables import DEFAULT_KIND, cable_kind, check_pattern
 from cablesim.config import Config, to_dict
 from cablesim.errors import ConfigError, InputError
 from cablesim.jobs import Job
@@ -68,6 +68,7 @@ class SceneSize(Config):
     hoses: int = 4
     periods: int = 3  # K_p
     cable: str = DEFAULT_KIND  # the kind of every cable (cablesim.cables)
+    pattern: str | None = None  # the surface pattern of every cable (None: the kind's)
 
     def _validate(self) -> None:
         for name in ("width", "height", "hoses", "periods"):
@@ -75,6 +76,8 @@ class SceneSize(Config):
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ConfigError(f"scene.{name}", f"must be a positive integer, got {v!r}")
         cable_kind(self.cable, "scene.cable")
+        if self.pattern is not None:
+            check_pattern(self.pattern, "scene.pattern")
 
 
 @dataclass(frozen=True)
@@ -176,6 +179,8 @@ class ThesisConfig(Config):
         scene = to_dict(self.scene)
         if scene["cable"] == DEFAULT_KIND:  # the jobs of runs made before kinds existed
             del scene["cable"]
+        if scene["pattern"] is None:  # ... and before patterns existed
+            del scene["pattern"]
         return scene
 
     def interaction_jobs(self) -> list[Job]:
