@@ -136,6 +136,7 @@ class SimPanda(ArmModelChecks, Robot):
         self._site = m.site(n.site).id
         self._hand = m.body(n.hand_body).id
         self._eq = m.equality(n.grasp_equality).id
+        self._pad_geoms = {m.geom(g).id for g in n.finger_geoms}
         robot_bodies = robot_body_ids(m, n.prefix)
         self._robot_geom = np.isin(m.geom_bodyid, robot_bodies)
         mujoco.mj_forward(m, d)
@@ -331,10 +332,25 @@ class SimPanda(ArmModelChecks, Robot):
         self._closed = True
         self._drive_gripper(0.0, speed)
         opening = self.gripper_opening
-        held = width - epsilon_inner <= opening <= width + epsilon_outer and opening > 0.002
+        # fingers closed to under 2 mm hold nothing, unless both pads press on a cable: a
+        # 2 mm wire is squeezed to about 0.5 mm by the soft contacts of its light vertices
+        # (0.2 g each, against 70 N), where the width window alone would accept an empty hand
+        held = width - epsilon_inner <= opening <= width + epsilon_outer and (
+            opening > 0.002 or self._pads_on_cable()
+        )
         if held and self.config.grasp_mode == "equality":
             held = self._attach_nearest_vertex()
         return bool(held)
+
+    def _pads_on_cable(self) -> bool:
+        """Whether both finger pads touch a cable (a flex) now."""
+        d = self.world.data
+        touched = set()
+        for i in range(d.ncon):
+            c = d.contact[i]
+            if c.flex[0] >= 0 or c.flex[1] >= 0:
+                touched.update(int(g) for g in c.geom if g in self._pad_geoms)
+        return len(touched) == 2
 
     def _drive_gripper(self, target: float, speed: float) -> None:
         """Ramp the gripper command at ``speed`` (m/s), then wait until the fingers stop."""

@@ -99,6 +99,15 @@ def test_friction_grasp_moves_hose_with_gain(robot: SimPanda):
     assert robot.gripper_opening > 0.07
 
 
+def test_an_empty_hand_closed_for_a_thin_wire_holds_nothing(robot: SimPanda):
+    """A 2 mm wire's window (0.4 to 3.6 mm) reaches below the 2 mm that marks an empty hand;
+    fingers closed under 2 mm count as holding only where both pads press on a cable."""
+    assert robot.open()
+    assert not robot.grasp(width=0.002, epsilon_inner=0.0016, epsilon_outer=0.0016)
+    assert robot.gripper_opening < 0.002
+    assert not robot._pads_on_cable()
+
+
 def test_equality_grasp_fallback():
     robot = SimPanda(FixtureWorld(), SimPandaConfig(grasp_mode="equality"))
     res, held = approach_and_grasp(robot, _hose_grasp(robot.world))

@@ -19,7 +19,11 @@ from cablesim.sim.config import CameraConfig, EpisodeConfig, HoseConfig, SceneCo
 from cablesim.sim.layout import sample_hoses
 
 OTHER_KINDS = [k for k in CABLE_KINDS if k != DEFAULT_KIND]
-GRASPED_KINDS = ["electrical_cable", "rope"]  # the default hose: tests/sim, tests/episode
+GRASPED_KINDS = [
+    "electrical_cable",
+    "rope",
+    "thin_wire",
+]  # the default hose: tests/sim, tests/episode
 
 
 def test_the_default_kind_is_the_hose_the_scenes_always_had() -> None:
@@ -182,9 +186,12 @@ def test_each_kind_is_grasped_and_follows_the_gripper(kind: str) -> None:
 
 #: The scene per kind of the grasp test (seed, image size): a thin cable needs pixels to be
 #: picked at all (a 7 mm cable is 1.5 px wide at 160x120 from the default camera, under the
-#: picker's 10 px segments).  The thin wire is not here: its grasp does not hold yet
-#: (docs/cables.md, "Known limits").
-KIND_SCENES = {"electrical_cable": (3, 320, 240), "rope": (3, 160, 120)}
+#: picker's 10 px segments; a 2 mm wire about 1 px at 640x480).
+KIND_SCENES = {
+    "electrical_cable": (3, 320, 240),
+    "rope": (3, 160, 120),
+    "thin_wire": (3, 640, 480),
+}
 
 
 def test_the_scene_command_pulls_a_rope_without_tearing_it(tmp_path) -> None:
