@@ -356,6 +356,29 @@ def ports_free() -> bool:
     return True
 
 
+#: The server's scheduling priority (nice value) where this process may raise it (root or
+#: CAP_SYS_NICE): ahead of ordinary processes, so that a test run beside it on a small machine
+#: does not starve it.  Starved for a second, it sends libfranka no state and the client fails
+#: with ``UDP receive: Timeout`` (seen in a ``tests/robot`` loop beside a CI run, load 4.8 on
+#: two cores: the twin's arm mid-motion, and the connection in ``test_franka_sim_clock``).
+SERVER_NICENESS = -5
+
+
+def _renice(pid: int, niceness: int) -> int | None:
+    """Give process ``pid`` and its threads ``niceness``; the value set, or None where this
+    process may not (then the server keeps the priority it inherited).  Set right after the
+    process starts, before its Python creates threads (new threads inherit it); threads
+    already there are set one by one (Linux's nice value is per thread)."""
+    tasks = Path(f"/proc/{pid}/task")
+    ids = [int(t.name) for t in tasks.iterdir()] if tasks.is_dir() else [pid]
+    try:
+        for tid in ids:
+            os.setpriority(os.PRIO_PROCESS, tid, niceness)
+    except (PermissionError, ProcessLookupError):
+        return None
+    return niceness
+
+
 class FrankaSimServer:
     """A franka-sim server subprocess on 127.0.0.1 (module docstring); a context manager.
 
@@ -374,6 +397,8 @@ class FrankaSimServer:
     host that runs either process late slows the robot's time down instead of losing cycles;
     see ``_LOCKSTEP``) or ``"realtime"`` (franka-sim's own 1 kHz wall-clock pacing, where a
     late client loses cycles as on the robot; for measuring this host's timing).
+    ``niceness``: the server's nice value where permitted (``SERVER_NICENESS``; None leaves
+    it as inherited); ``niceness_applied`` says what was set.
     :meth:`cycle_violations` reads the cycle monitor's record of every motion-limit violation
     (``_MONITOR``), which tells a reflex caused by this host's timing from one caused by the
     motion (:attr:`CycleViolation.host_timing`).
@@ -393,10 +418,13 @@ class FrankaSimServer:
         workdir: str | os.PathLike[str] | None = None,
         trace: str | os.PathLike[str] | None = None,
         clock: str = "lockstep",
+        niceness: int | None = SERVER_NICENESS,
     ) -> None:
         if clock not in CLOCKS:
             raise InputError(f"clock: {clock!r} is not one of {', '.join(CLOCKS)}")
         self.clock = clock
+        self.niceness = niceness
+        self.niceness_applied: int | None = None  # what start() could set (None: nothing)
         self.object_width = object_width
         self.enforce_motion_limits = bool(enforce_motion_limits)
         self.joint_discontinuity_scale = float(joint_discontinuity_scale)
@@ -463,6 +491,8 @@ class FrankaSimServer:
                 cwd=work,
                 start_new_session=True,
             )
+        if self.niceness is not None:
+            self.niceness_applied = _renice(self.proc.pid, self.niceness)
         deadline = time.monotonic() + self.startup_timeout
         while "Server ready for new client connection" not in self.log_text():
             if self.proc.poll() is not None:

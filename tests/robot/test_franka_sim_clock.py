@@ -11,6 +11,7 @@ answered it.  Both clocks are run here with this process stopped for 2-12 ms eve
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from cablesim.robot.franky_panda import FrankyPanda
 from cablesim.twin.episode import FRANKA_SIM_ROBOT
 from cablesim.twin.franka_sim import (
     HOST,
+    SERVER_NICENESS,
     FrankaSimServer,
     FrankaSimUnavailable,
     Stalls,
@@ -142,3 +144,33 @@ def test_the_clock_is_read_once_the_physics_thread_reports_it(tmp_path) -> None:
         later.join()
     server.log.write_text("Server ready for new client\n")  # franka-sim's own clock
     assert server.running_clock(timeout=0.1) == "realtime"
+
+
+def _may_raise_priority() -> bool:
+    """Whether this process may give a child a negative nice value (root or CAP_SYS_NICE)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, os.getpriority(os.PRIO_PROCESS, 0) - 1)
+    except PermissionError:
+        return False
+    os.setpriority(os.PRIO_PROCESS, 0, os.getpriority(os.PRIO_PROCESS, 0) + 1)
+    return True
+
+
+def test_the_server_runs_ahead_of_ordinary_processes_where_permitted(tmp_path) -> None:
+    """Every thread of franka-sim gets ``SERVER_NICENESS`` (the threads it starts after the
+    renice inherit it), or, where this process may not raise a priority, nothing is set."""
+    server = FrankaSimServer(object_width=None, lifetime=60.0, workdir=tmp_path)
+    try:
+        server.start()
+    except FrankaSimUnavailable as e:
+        pytest.skip(str(e))
+    try:
+        tasks = sorted((Path("/proc") / str(server.proc.pid) / "task").iterdir())
+        nice = {int(t.name): os.getpriority(os.PRIO_PROCESS, int(t.name)) for t in tasks}
+    finally:
+        server.stop()
+    if not _may_raise_priority():
+        assert server.niceness_applied is None
+        return
+    assert server.niceness_applied == SERVER_NICENESS < 0
+    assert len(nice) > 1 and set(nice.values()) == {SERVER_NICENESS}, nice
