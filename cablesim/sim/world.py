@@ -28,6 +28,7 @@ import mujoco
 import numpy as np
 
 from cablesim.cables import CableKind
+from cablesim.episode.surface import SURFACES, Surface
 from cablesim.errors import PhysicsDivergedError
 from cablesim.panda.model import attach_panda, set_arm
 from cablesim.panda.visuals import add_mesh_visuals_same_view
@@ -44,6 +45,7 @@ from cablesim.sim.layout import (
     start_shape,
 )
 from cablesim.sim.settle import settle_world
+from cablesim.sim.table import table_xml
 
 CAMERA_NAME = "rgbd"
 _WARNINGS = (
@@ -149,33 +151,15 @@ def cable_xml(
 
 
 def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
-    b, h = cfg.board, cfg.hoses
+    h = cfg.hoses
     R = look_at_frame(cam.position, cam.look_at)
-    tex = ""
-    if b.background == "solid":
-        board_mat = f'<material name="board" rgba="{_fmt(b.solid_rgb)} 1" specular="0.1"/>'
+    flexes, equalities = [], []
+    if cfg.surface == "table":
+        board_mat, board_geoms = table_xml(cfg, hoses)
     else:
-        tex = f'<texture name="board_tex" type="2d" file="{assets.texture_path(b.background)}"/>'
-        board_mat = '<material name="board" texture="board_tex" texrepeat="1 1" specular="0.1"/>'
-    conn = []
-    x_tip = b.x - b.connector_length
-    for i, (y, z) in enumerate(b.connectors):
-        conn.append(
-            f'<geom name="connector{i}" type="mesh" mesh="male" pos="{b.x:.6g} {y:.6g} {z:.6g}" '
-            f'quat="0 0.70710678 0 0.70710678" material="brass" contype="0" conaffinity="0"/>'
-        )
+        board_mat, board_geoms = _board_xml(cfg, hoses)
     light = _lighting(cfg)
-    couplings, flexes, equalities = [], [], []
     for s in hoses:
-        for k, c in enumerate(s.ends):
-            y, z = b.connectors[c]
-            x0 = x_tip + FEMALE_OVERLAP
-            couplings.append(
-                f'<geom name="{s.name}_coupling{k}" type="mesh" mesh="female" '
-                f'pos="{x0:.6g} {y:.6g} {z:.6g}" quat="0 0.70710678 0 0.70710678" '
-                f'rgba="{_fmt(np.clip(np.array(s.rgb) * 0.7 + 0.15, 0, 1))} 1" '
-                f'contype="0" conaffinity="0"/>'
-            )
         top = start_shape(cfg, s)[0]
         spacing = s.length / (s.n_vertices - 1)
         c = s.cable
@@ -236,7 +220,6 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     <material name="floor" rgba="0.25 0.25 0.27 1"/>
     <texture name="room" type="skybox" builtin="gradient" rgb1="0.62 0.63 0.66" rgb2="0.32 0.33 0.36"
              width="64" height="64"/>
-    {tex}
     {board_mat}
   </asset>
   <worldbody>
@@ -244,10 +227,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
            diffuse="{light["key"]}" specular="0.1 0.1 0.1"/>
     <geom name="floor" type="plane" size="3 3 0.1" pos="0 0 -0.75" material="floor" contype="0" conaffinity="0"/>
     <geom name="table" type="box" size="0.75 0.85 0.02" pos="0.15 0 -0.02" material="table" friction="0.8"/>
-    <geom name="board" type="box" size="{b.thickness / 2:.6g} {b.width / 2:.6g} {b.height / 2:.6g}"
-          pos="{b.x + b.thickness / 2:.6g} 0 {b.height / 2:.6g}" material="board" friction="0.6"/>
-    {"".join(conn)}
-    {"".join(couplings)}
+    {board_geoms}
     <camera name="{CAMERA_NAME}" mode="fixed" pos="{_fmt(cam.position)}" xyaxes="{_fmt(cam_xy)}"
             fovy="{cfg.camera.fovy}"/>
     {"".join(flexes)}
@@ -256,6 +236,41 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     {"".join(equalities)}
   </equality>
 </mujoco>"""
+
+
+def _board_xml(cfg: SceneConfig, hoses: list[HoseSpec]) -> tuple[str, str]:
+    """(assets, world geoms) of the task board: the board, its connectors and the coupling on
+    every attached hose end."""
+    b = cfg.board
+    if b.background == "solid":
+        mat = f'<material name="board" rgba="{_fmt(b.solid_rgb)} 1" specular="0.1"/>'
+    else:
+        mat = (
+            f'<texture name="board_tex" type="2d" file="{assets.texture_path(b.background)}"/>'
+            '<material name="board" texture="board_tex" texrepeat="1 1" specular="0.1"/>'
+        )
+    geoms = [
+        f'<geom name="board" type="box" size="{b.thickness / 2:.6g} {b.width / 2:.6g} '
+        f'{b.height / 2:.6g}" pos="{b.x + b.thickness / 2:.6g} 0 {b.height / 2:.6g}" '
+        'material="board" friction="0.6"/>'
+    ]
+    x_tip = b.x - b.connector_length
+    for i, (y, z) in enumerate(b.connectors):
+        geoms.append(
+            f'<geom name="connector{i}" type="mesh" mesh="male" pos="{b.x:.6g} {y:.6g} {z:.6g}" '
+            f'quat="0 0.70710678 0 0.70710678" material="brass" contype="0" conaffinity="0"/>'
+        )
+    for s in hoses:
+        for k, c in enumerate(s.ends):
+            y, z = b.connectors[c]
+            x0 = x_tip + FEMALE_OVERLAP
+            geoms.append(
+                f'<geom name="{s.name}_coupling{k}" type="mesh" mesh="female" '
+                f'pos="{x0:.6g} {y:.6g} {z:.6g}" quat="0 0.70710678 0 0.70710678" '
+                f'rgba="{_fmt(np.clip(np.array(s.rgb) * 0.7 + 0.15, 0, 1))} 1" '
+                f'contype="0" conaffinity="0"/>'
+            )
+    return mat, "\n    ".join(geoms)
 
 
 def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose]) -> None:
@@ -391,6 +406,12 @@ class World:
             if hose.end_equality is not None:
                 m.eq_data[hose.end_equality, 3:6] = target[-1]
         mujoco.mj_forward(m, d)
+
+    @property
+    def surface(self) -> Surface:
+        """What holds the cables, as the interaction needs it (approach, action plane, the
+        height under a grasp): ``cfg.surface``'s."""
+        return SURFACES[self.cfg.surface]
 
     # ------------------------------------------------------------------ stepping
     @property

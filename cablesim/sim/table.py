@@ -1,0 +1,292 @@
+"""The table-top scene (``SceneConfig.surface = "table"``): cables lying and crossing on a mat
+on the table, the first end of each plugged into a socket on the table, the far end plugged
+into another socket or free.  Pure NumPy (the MJCF is text), like :mod:`cablesim.sim.layout`,
+which calls :func:`place_on_table` for each cable and :func:`socket_point` for each end.
+
+A start shape leaves its socket along the socket's yaw, climbs within the first few
+centimetres to its own height (cable ``rank`` r lies at ``radius + 2 mm + r (2.2 r_max + 2 mm)``
+above the table, so that no two start shapes touch) and wanders through two to four points
+drawn in ``table.region``, smoothed; a cable plugged at both ends is given a lateral wave
+whose amplitude makes the path exactly as long as the cable.  A path that crosses itself is
+drawn again (a flex does not collide with itself).  Settling lets the upper cables fall onto
+the lower ones: the crossings of the settled scene are real contacts.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from cablesim.cables import CableKind
+from cablesim.sim.config import SceneConfig, TableConfig
+
+LEAD = 0.06  # m: a start shape leaves its socket straight for this long
+CLIMB = 0.04  # m: and reaches its own height within this arc length
+PLUG_LENGTH = 0.03  # m: the plug on a cable end, inside the socket's mouth
+SOCKET_HALF = (0.025, 0.03)  # m: half-sizes of a socket box along and across its yaw
+MAX_REDRAWS = 20  # path draws before a self-crossing one is taken anyway
+MAT_TOP = 0.0005  # m: the mat's top above the table (cablesim.episode.surface.TABLE.height)
+
+
+def socket_direction(table: TableConfig, connector: int) -> np.ndarray:
+    """Unit world direction (x, y, 0) in which a cable leaves socket ``connector``."""
+    yaw = table.connectors[connector][2]
+    return np.array([math.cos(yaw), math.sin(yaw), 0.0])
+
+
+def socket_point(cfg: SceneConfig, connector: int) -> np.ndarray:
+    """World position of a plugged cable end: the front of the plug in socket ``connector``."""
+    x, y, _ = cfg.table.connectors[connector]
+    d = socket_direction(cfg.table, connector)
+    return np.array([x, y, cfg.table.socket_height]) + d * PLUG_LENGTH
+
+
+def cable_height(cable: CableKind, rank: int, r_max: float) -> float:
+    """The height of the centre line of the cable of ``rank`` in its start shape."""
+    return cable.radius + 0.002 + rank * (2.2 * r_max + 0.002)
+
+
+def place_on_table(
+    cfg: SceneConfig,
+    rng: np.random.Generator,
+    free: list[int],
+    length: float,
+    cable: CableKind,
+    rank: int,
+    r_max: float,
+    to_come: int,
+) -> tuple[tuple[int, ...], float, float, np.ndarray]:
+    """A lying cable's sockets (taken from ``free``), bulge (0), height and start shape
+    (``n_vertices`` x 3), all drawn from ``rng``."""
+    from cablesim.sim.config import hose_vertex_count
+
+    t = cfg.table
+    a = free.pop(int(rng.integers(0, len(free))))
+    want_both = rng.random() < cfg.hoses.both_ends_probability
+    z = cable_height(cable, rank, r_max)
+    n = hose_vertex_count(length, cable.segment_length)
+    pa = socket_point(cfg, a)
+    b = None
+    if want_both and len(free) - 1 >= to_come:
+        # another socket the cable reaches with some slack, not right beside this one
+        ok = [
+            c
+            for c in free
+            if 0.15 <= np.linalg.norm(socket_point(cfg, c)[:2] - pa[:2]) <= 0.7 * length - 2 * LEAD
+        ]
+        if ok:
+            b = ok[int(rng.integers(0, len(ok)))]
+    path = None
+    for _ in range(MAX_REDRAWS):
+        k = 2 + int(rng.integers(0, 3))
+        x0, x1, y0, y1 = t.region
+        waypoints = np.stack([rng.uniform(x0, x1, k), rng.uniform(y0, y1, k)], 1)
+        phase = float(rng.uniform(0.0, 2 * math.pi))
+        waves = 1 + int(rng.integers(0, 3))
+        path = _path(cfg, a, b, waypoints, length, phase, waves)
+        if path is not None and not _crosses_itself(path):
+            break
+    if path is None:  # the far socket is out of the cable's reach on every draw: leave it free
+        b = None
+        path = _path(cfg, a, None, waypoints, length, phase, waves)
+        assert path is not None
+    free_end = b is None
+    if not free_end:
+        free.remove(b)
+    shape = _lift(path, length, n, pa[2], z, both=not free_end)
+    ends = (a,) if free_end else (a, b)
+    return ends, 0.0, z, shape
+
+
+def _path(
+    cfg: SceneConfig,
+    a: int,
+    b: int | None,
+    waypoints: np.ndarray,
+    length: float,
+    phase: float,
+    waves: int,
+) -> np.ndarray | None:
+    """(N, 2) plan-view path of ``length`` from socket ``a`` (to socket ``b``) through
+    ``waypoints``; None when a path to ``b`` cannot be made that long or that short."""
+    pa = socket_point(cfg, a)[:2]
+    da = socket_direction(cfg.table, a)[:2]
+    pts = [pa, pa + LEAD * da, *waypoints]
+    if b is not None:
+        pb = socket_point(cfg, b)[:2]
+        db = socket_direction(cfg.table, b)[:2]
+        pts += [pb + LEAD * db, pb]
+    smooth = _chaikin(np.asarray(pts), keep=(2, 2 if b is not None else 1))
+    fine = _resample2(smooth, 0.002)
+    if b is None:
+        # a free end: continue in a wide arc until the path is long enough, then cut it
+        total = _arc(fine)
+        if total < length:
+            d = fine[-1] - fine[-2]
+            d /= np.linalg.norm(d)
+            extra = length - total + 0.01
+            s = np.linspace(0, extra, max(2, int(extra / 0.002)))[1:]
+            turn = 2.0 / max(length, 0.3) * (1 if phase < math.pi else -1)
+            ang = math.atan2(d[1], d[0]) + turn * s
+            tail = fine[-1] + np.cumsum(
+                np.stack([np.cos(ang), np.sin(ang)], 1) * np.diff(np.concatenate([[0], s]))[:, None],
+                axis=0,
+            )
+            fine = np.vstack([fine, tail])
+        return _cut(fine, length)
+    base = _arc(fine)
+    if base > length:
+        return None
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(fine, axis=0), axis=1))])
+    tangent = np.gradient(fine, axis=0)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
+    normal = np.stack([-tangent[:, 1], tangent[:, 0]], 1)
+    # the wave spares the straight leads at both ends
+    taper = np.clip(np.minimum(s - LEAD, s[-1] - LEAD - s) / 0.05, 0.0, 1.0)
+    taper = taper * taper * (3 - 2 * taper)
+    wave = np.sin(math.pi * waves * s / s[-1] + phase) * taper
+
+    def waved(amp: float) -> np.ndarray:
+        return fine + (amp * wave)[:, None] * normal
+
+    lo, hi = 0.0, 0.4
+    if _arc(waved(hi)) < length:
+        return None
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _arc(waved(mid)) < length else (lo, mid)
+    return waved(0.5 * (lo + hi))
+
+
+def _lift(
+    path: np.ndarray, length: float, n: int, z_socket: float, z: float, both: bool
+) -> np.ndarray:
+    """The 3D start shape: ``n`` vertices along ``path`` at height ``z``, climbing from the
+    socket's height within ``CLIMB`` of each plugged end; chords of (nearly) length/(n-1)."""
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    u = np.clip(s / CLIMB, 0.0, 1.0)
+    ramp = u * u * (3 - 2 * u)
+    if both:
+        v = np.clip((s[-1] - s) / CLIMB, 0.0, 1.0)
+        ramp = np.minimum(ramp, v * v * (3 - 2 * v))
+    heights = z_socket + (z - z_socket) * ramp
+    pts = np.column_stack([path, heights])
+    # resample by 3D arc length to n vertices, then even out the chords (both ends fixed)
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    c = np.concatenate([[0.0], np.cumsum(seg)])
+    t = np.linspace(0, c[-1], n)
+    out = np.stack([np.interp(t, c, pts[:, k]) for k in range(3)], 1)
+    chord = length / (n - 1)
+    for _ in range(300):
+        d = np.diff(out, axis=0)
+        size = np.linalg.norm(d, axis=1, keepdims=True)
+        corr = 0.5 * (1 - chord / np.maximum(size, 1e-12)) * d
+        first, last = out[0].copy(), out[-1].copy()
+        out[:-1] += corr
+        out[1:] -= corr
+        out[0] = first
+        if both:
+            out[-1] = last
+    return out
+
+
+def _chaikin(pts: np.ndarray, keep: tuple[int, int], iterations: int = 4) -> np.ndarray:
+    """Corner-cutting smoothing that keeps the first ``keep[0]`` and last ``keep[1]`` points
+    (the straight leads out of the sockets)."""
+    head, tail = pts[: keep[0] - 1], pts[len(pts) - keep[1] + 1 :]
+    mid = pts[keep[0] - 1 : len(pts) - keep[1] + 1]
+    for _ in range(iterations):
+        q = 0.75 * mid[:-1] + 0.25 * mid[1:]
+        r = 0.25 * mid[:-1] + 0.75 * mid[1:]
+        inner = np.empty((2 * len(q), 2))
+        inner[0::2], inner[1::2] = q, r
+        mid = np.vstack([mid[:1], inner, mid[-1:]])
+    return np.vstack([head, mid, tail])
+
+
+def _arc(p: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def _resample2(p: np.ndarray, step: float) -> np.ndarray:
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    t = np.linspace(0, s[-1], max(2, int(math.ceil(s[-1] / step)) + 1))
+    return np.stack([np.interp(t, s, p[:, k]) for k in range(p.shape[1])], 1)
+
+
+def _cut(p: np.ndarray, length: float) -> np.ndarray:
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    keep = s < length
+    end = np.array([np.interp(length, s, p[:, k]) for k in range(p.shape[1])])
+    return np.vstack([p[keep], end])
+
+
+def _crosses_itself(path: np.ndarray, step: float = 0.01) -> bool:
+    """Whether the plan-view path comes closer to itself than a cable's thickness away from
+    its neighbourhood along it (a crossing or a near touch), on a coarse resampling."""
+    q = _resample2(path, step)
+    d = np.linalg.norm(q[:, None] - q[None], axis=2)
+    idx = np.arange(len(q))
+    apart = np.abs(idx[:, None] - idx[None]) * step > 0.06
+    return bool((d[apart] < 0.025).any())
+
+
+def table_xml(cfg: SceneConfig, hoses: list) -> tuple[str, str]:
+    """(assets, world geoms) of the table scene: the mat under the cable region (with the
+    table's ``background``), a socket at every connector and a plug on every plugged end."""
+    from cablesim.sim import assets
+
+    t = cfg.table
+
+    def fmt(v) -> str:
+        return " ".join(f"{float(x):.9g}" for x in np.ravel(v))
+
+    x0, x1, y0, y1 = t.region
+    m = t.mat_margin
+    if t.background == "solid":
+        mat = f'<material name="mat" rgba="{fmt(t.solid_rgb)} 1" specular="0.05"/>'
+    else:
+        mat = (
+            f'<texture name="mat_tex" type="2d" file="{assets.texture_path(t.background)}"/>'
+            '<material name="mat" texture="mat_tex" texrepeat="1 1" specular="0.05"/>'
+        )
+    mat += '<material name="socket" rgba="0.12 0.12 0.13 1" specular="0.2"/>'
+    geoms = [
+        f'<geom name="mat" type="box" size="{(x1 - x0) / 2 + m:.6g} {(y1 - y0) / 2 + m:.6g} '
+        f'{MAT_TOP / 2}" pos="{(x0 + x1) / 2:.6g} {(y0 + y1) / 2:.6g} {MAT_TOP / 2}" '
+        'material="mat" friction="0.8"/>'
+    ]
+    hz = (t.socket_height + 0.012) / 2  # the socket box reaches 12 mm above a plug's centre
+    for i, (x, y, yaw) in enumerate(t.connectors):
+        d = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        centre = np.array([x, y, hz]) - d * SOCKET_HALF[0]  # behind its mouth at (x, y)
+        quat = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        geoms.append(
+            f'<geom name="socket{i}" type="box" size="{SOCKET_HALF[0]} {SOCKET_HALF[1]} {hz:.6g}" '
+            f'pos="{fmt(centre)}" quat="{fmt(quat)}" material="socket"/>'
+        )
+    for s in hoses:
+        for k, c in enumerate(s.ends):
+            d = socket_direction(t, c)
+            end = socket_point(cfg, c)
+            mid = end - d * PLUG_LENGTH / 2
+            # a cylinder along the socket's yaw: its z axis turned onto d
+            quat = _quat_z_to(d)
+            rgb = np.clip(np.array(s.rgb) * 0.7 + 0.15, 0, 1)
+            geoms.append(
+                f'<geom name="{s.name}_plug{k}" type="cylinder" '
+                f'size="{max(1.6 * s.radius, 0.004):.6g} {PLUG_LENGTH / 2:.6g}" pos="{fmt(mid)}" '
+                f'quat="{fmt(quat)}" rgba="{fmt(rgb)} 1" contype="0" conaffinity="0"/>'
+            )
+    return mat, "\n    ".join(geoms)
+
+
+def _quat_z_to(d: np.ndarray) -> tuple[float, float, float, float]:
+    """The rotation (w, x, y, z) taking the z axis onto the horizontal unit vector ``d``."""
+    # z -> d: rotate by 90 degrees about the axis z x d
+    axis = np.cross([0.0, 0.0, 1.0], d)
+    axis /= np.linalg.norm(axis)
+    s = math.sin(math.pi / 4)
+    return (math.cos(math.pi / 4), axis[0] * s, axis[1] * s, axis[2] * s)
