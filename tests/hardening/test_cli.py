@@ -94,7 +94,17 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path):
     env = dict(os.environ, CABLESIM_CACHE=str(tmp_path / "cache"))  # must settle: takes a while
     cmd = [sys.executable, "-m", "cablesim.cli", "scene", "--out", str(tmp_path / "o")]
     cmd += ["--seed", "8", "--hoses", "4", "--width", "32", "--height", "24"]
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+    # Ctrl-C as a terminal delivers it: to a process whose SIGINT is not ignored (a test run
+    # started in the background, `nohup pytest &`, hands its children an ignored SIGINT, and
+    # Python then installs no KeyboardInterrupt handler: the scene ran to its end, exit 0)
+    p = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         assert p.stdout is not None
         first = p.stdout.readline()  # "[scene] building ...", printed just before World.build
