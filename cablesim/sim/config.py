@@ -792,6 +792,12 @@ class EpisodeConfig(Config):
             raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
         if self.max_draws < 1:
             raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
+        if self.scene.surface == "table" and self.interaction.kind == "push":
+            raise ConfigError(
+                "interaction.kind",
+                "push presses the closed hand along the approach, into the board; on the table "
+                "that is into the table top: use grasp (the default) there",
+            )
         if self.hose is not None and (
             isinstance(self.hose, bool)
             or not isinstance(self.hose, int)

@@ -177,7 +177,9 @@ def _place_on_board(
             and np.linalg.norm(attach_point(cfg, c) - pa) < 0.8 * length
         ]
         # a hose attached at both ends must hang clear of the table
-        ok = [c for c in ok if _lowest_point(pa, attach_point(cfg, c), length, bulge) > floor + 0.02]
+        ok = [
+            c for c in ok if _lowest_point(pa, attach_point(cfg, c), length, bulge) > floor + 0.02
+        ]
         # leave enough connectors for the hoses still to come
         if ok and len(free) - 1 >= to_come:
             b = ok[int(rng.integers(0, len(ok)))]

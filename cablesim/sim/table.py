@@ -130,7 +130,8 @@ def _path(
             turn = 2.0 / max(length, 0.3) * (1 if phase < math.pi else -1)
             ang = math.atan2(d[1], d[0]) + turn * s
             tail = fine[-1] + np.cumsum(
-                np.stack([np.cos(ang), np.sin(ang)], 1) * np.diff(np.concatenate([[0], s]))[:, None],
+                np.stack([np.cos(ang), np.sin(ang)], 1)
+                * np.diff(np.concatenate([[0], s]))[:, None],
                 axis=0,
             )
             fine = np.vstack([fine, tail])
