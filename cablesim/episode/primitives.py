@@ -201,10 +201,16 @@ def plan_interaction(
         directions = action_directions(cfg.actions, axis, T_world_camera, surface)
     if not g or g.pose is None:
         return False, f"planned {g.reason}"
+    g1 = g.pose
+    if surface.lift > 0 and cfg.kind == "grasp":
+        g1 = g1.translated(-surface.lift * _unit(approach))
+        r = dry.move_to(g1, speed=cfg.grasp.approach_speed)
+        if not r:
+            return False, f"planned lift: {r.reason}"
     a = cfg.actions
     for label, u in directions:
         depth = cfg.push_depth if cfg.kind == "push" else a.amplitude
-        way = periodic_waypoints(g.pose, u, depth, 1, one_sided=cfg.kind == "push")
+        way = periodic_waypoints(g1, u, depth, 1, one_sided=cfg.kind == "push")
         r = _run_waypoints(dry, way, a.speed, f"planned action {label}")
         if not r:
             return False, r.reason

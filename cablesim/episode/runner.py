@@ -351,6 +351,12 @@ def grasp(s: InteractionState) -> bool:
         return s.abort(g.outcome, g.reason, moved=g.moved)
     result.grasp = g.pose
     assert g.pose is not None
+    if cfg.kind == "grasp" and s.surface.lift > 0:  # off the table before the actions
+        lifted = g.pose.translated(-s.surface.lift * s.approach)
+        r = s.robot.move_to(lifted, speed=cfg.grasp.approach_speed)
+        if not r:
+            return s.abort(Outcome.ACTION_FAILED, f"lift after the grasp: {r.reason}")
+        result.grasp = lifted  # the actions' centre g1
     verb = "grasped" if cfg.kind == "grasp" else "at"
     s.say(f"{verb} hose at {np.round(g.pose.position, 3)} ({jsonable(g.details)})")
     return True

@@ -28,7 +28,10 @@ class Surface:
     ``-approach``) rather than in the image plane (on the board the two nearly agree, and the
     image plane is what the thesis used); ``height``: the world z of a horizontal surface
     under the grasp (None: none), which raises a grasp so that the fingertips stay
-    ``FINGERTIP_CLEARANCE`` above it."""
+    ``FINGERTIP_CLEARANCE`` above it; ``lift``: how far the hand lifts the grasped cable off
+    the surface (along -approach) before the actions, so that the fingertips do not drag on
+    it (measured on the table without it: the pads' friction on the mat held the hand 16 mm
+    short of an action's target)."""
 
     name: str
     approach: tuple[float, float, float]
@@ -36,6 +39,7 @@ class Surface:
     plane: tuple[tuple[float, float, float], tuple[float, float, float]]
     in_plane: bool = False
     height: float | None = None
+    lift: float = 0.0
 
     def grasp_centre(self, centre: np.ndarray) -> np.ndarray:
         """``centre`` (world), raised where the fingertips would otherwise touch the surface."""
@@ -48,6 +52,11 @@ class Surface:
 BOARD = Surface("board", (1.0, 0.0, 0.0), ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)))
 #: the table's top lies at z = 0, the simulated mat's at 0.5 mm (cablesim.sim.table.MAT_TOP)
 TABLE = Surface(
-    "table", (0.0, 0.0, -1.0), ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)), in_plane=True, height=0.0005
+    "table",
+    (0.0, 0.0, -1.0),
+    ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+    in_plane=True,
+    height=0.0005,
+    lift=0.01,
 )
 SURFACES = {s.name: s for s in (BOARD, TABLE)}

@@ -20,7 +20,7 @@ cross at least one other hose (the thesis's clutter), re-drawing the scene when 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -120,8 +120,9 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
             from cablesim.sim.table import place_on_table
 
             ends, bulge, floor, shape = place_on_table(
-                cfg, rng, free, float(lengths[i]), cable, rank, r_max, h.count - i - 1
-            )
+                cfg, rng, free, float(lengths[i]), cable, rank, r_max, h.count - i - 1,
+                [s.shape for s in specs if s.shape is not None],
+            )  # fmt: skip
         else:
             ends, bulge, floor = _place_on_board(
                 cfg, rng, free, float(lengths[i]), cable, rank, r_max, h.count - i - 1
@@ -146,6 +147,15 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
                 shape=shape,
             )
         )
+    if cfg.surface == "table":  # lift one cable over another where their start shapes touch
+        from cablesim.sim.table import separate
+
+        shapes = separate(
+            [s.shape for s in specs],  # type: ignore[misc]
+            [s.radius for s in specs],
+            [(True, s.both_ends) for s in specs],
+        )
+        specs = [replace(s, shape=p) for s, p in zip(specs, shapes, strict=True)]
     return specs
 
 

@@ -7,8 +7,10 @@ A start shape leaves its socket along the socket's yaw, climbs within the first 
 centimetres to its own height (cable ``rank`` r lies at ``radius + 2 mm + r (2.2 r_max + 2 mm)``
 above the table, so that no two start shapes touch) and wanders through two to four points
 drawn in ``table.region``, smoothed; a cable plugged at both ends is given a lateral wave
-whose amplitude makes the path exactly as long as the cable.  A path that crosses itself is
-drawn again (a flex does not collide with itself).  Settling lets the upper cables fall onto
+whose amplitude makes the path exactly as long as the cable.  A path that crosses itself (a
+flex does not collide with itself) or passes within 5 cm of an earlier cable's plugged end
+(where that cable climbs from the socket's height to its own) is drawn again, and a cable
+takes a socket no earlier cable passes within 5 cm of.  Settling lets the upper cables fall onto
 the lower ones: the crossings of the settled scene are real contacts.
 """
 
@@ -25,7 +27,8 @@ LEAD = 0.06  # m: a start shape leaves its socket straight for this long
 CLIMB = 0.04  # m: and reaches its own height within this arc length
 PLUG_LENGTH = 0.03  # m: the plug on a cable end, inside the socket's mouth
 SOCKET_HALF = (0.025, 0.03)  # m: half-sizes of a socket box along and across its yaw
-MAX_REDRAWS = 20  # path draws before a self-crossing one is taken anyway
+MAX_REDRAWS = 50  # path draws before the least flawed one is taken
+SOCKET_CLEARANCE = 0.05  # m kept between a path and another cable's plugged end
 MAT_TOP = 0.0005  # m: the mat's top above the table (cablesim.episode.surface.TABLE.height)
 
 
@@ -56,13 +59,26 @@ def place_on_table(
     rank: int,
     r_max: float,
     to_come: int,
+    earlier: list[np.ndarray] | None = None,
 ) -> tuple[tuple[int, ...], float, float, np.ndarray]:
     """A lying cable's sockets (taken from ``free``), bulge (0), height and start shape
-    (``n_vertices`` x 3), all drawn from ``rng``."""
+    (``n_vertices`` x 3), all drawn from ``rng``.  ``earlier``: the start shapes placed before
+    it; a socket they pass within 5 cm of is taken only when no other is free, and this
+    cable's path keeps 5 cm from their sockets (where they climb to their heights)."""
     from cablesim.sim.config import hose_vertex_count
 
     t = cfg.table
-    a = free.pop(int(rng.integers(0, len(free))))
+    earlier = earlier or []
+    used = [(float(p[0, 0]), float(p[0, 1])) for p in earlier]
+    used += [(float(p[-1, 0]), float(p[-1, 1])) for p in earlier]
+
+    def clear(c: int) -> bool:
+        q = socket_point(cfg, c)[:2]
+        return all(np.linalg.norm(p[:, :2] - q, axis=1).min() >= SOCKET_CLEARANCE for p in earlier)
+
+    pool = [c for c in free if clear(c)] or free
+    a = pool[int(rng.integers(0, len(pool)))]
+    free.remove(a)
     want_both = rng.random() < cfg.hoses.both_ends_probability
     z = cable_height(cable, rank, r_max)
     n = hose_vertex_count(length, cable.segment_length)
@@ -74,23 +90,33 @@ def place_on_table(
             c
             for c in free
             if 0.15 <= np.linalg.norm(socket_point(cfg, c)[:2] - pa[:2]) <= 0.7 * length - 2 * LEAD
+            and clear(c)
         ]
         if ok:
             b = ok[int(rng.integers(0, len(ok)))]
-    path = None
+    path, best = None, None
     for _ in range(MAX_REDRAWS):
         k = 2 + int(rng.integers(0, 3))
         x0, x1, y0, y1 = t.region
-        waypoints = np.stack([rng.uniform(x0, x1, k), rng.uniform(y0, y1, k)], 1)
+        points = np.stack([rng.uniform(x0, x1, k + 12), rng.uniform(y0, y1, k + 12)], 1)
+        waypoints, spare = points[:k], points[k:]
         phase = float(rng.uniform(0.0, 2 * math.pi))
         waves = 1 + int(rng.integers(0, 3))
-        path = _path(cfg, a, b, waypoints, length, phase, waves)
-        if path is not None and not _crosses_itself(path):
+        path = _path(cfg, a, b, waypoints, length, phase, waves, spare)
+        if path is None:
+            continue
+        # a path that crosses itself is worse than one that passes a socket
+        flaws = 2 * _crosses_itself(path) + _near(path, used)
+        if best is None or flaws < best[0]:
+            best = (flaws, path)
+        if flaws == 0:
             break
-    if path is None:  # the far socket is out of the cable's reach on every draw: leave it free
+    if best is None:  # the far socket is out of the cable's reach on every draw: leave it free
         b = None
-        path = _path(cfg, a, None, waypoints, length, phase, waves)
+        path = _path(cfg, a, None, waypoints, length, phase, waves, np.tile(spare, (4, 1)))
         assert path is not None
+    else:
+        path = best[1]
     free_end = b is None
     if not free_end:
         free.remove(b)
@@ -107,9 +133,11 @@ def _path(
     length: float,
     phase: float,
     waves: int,
+    spare: np.ndarray,
 ) -> np.ndarray | None:
     """(N, 2) plan-view path of ``length`` from socket ``a`` (to socket ``b``) through
-    ``waypoints``; None when a path to ``b`` cannot be made that long or that short."""
+    ``waypoints`` (a free end goes on through the ``spare`` points as far as it needs); None
+    when a path cannot be made that long (or, to ``b``, that short)."""
     pa = socket_point(cfg, a)[:2]
     da = socket_direction(cfg.table, a)[:2]
     pts = [pa, pa + LEAD * da, *waypoints]
@@ -120,21 +148,14 @@ def _path(
     smooth = _chaikin(np.asarray(pts), keep=(2, 2 if b is not None else 1))
     fine = _resample2(smooth, 0.002)
     if b is None:
-        # a free end: continue in a wide arc until the path is long enough, then cut it
-        total = _arc(fine)
-        if total < length:
-            d = fine[-1] - fine[-2]
-            d /= np.linalg.norm(d)
-            extra = length - total + 0.01
-            s = np.linspace(0, extra, max(2, int(extra / 0.002)))[1:]
-            turn = 2.0 / max(length, 0.3) * (1 if phase < math.pi else -1)
-            ang = math.atan2(d[1], d[0]) + turn * s
-            tail = fine[-1] + np.cumsum(
-                np.stack([np.cos(ang), np.sin(ang)], 1)
-                * np.diff(np.concatenate([[0], s]))[:, None],
-                axis=0,
-            )
-            fine = np.vstack([fine, tail])
+        # a free end: on through the spare points (in the region) until long enough, then cut
+        for extra in spare:
+            if _arc(fine) >= length:
+                break
+            pts.append(extra)
+            fine = _resample2(_chaikin(np.asarray(pts), keep=(2, 1)), 0.002)
+        if _arc(fine) < length:
+            return None
         return _cut(fine, length)
     base = _arc(fine)
     if base > length:
@@ -178,12 +199,19 @@ def _lift(
     c = np.concatenate([[0.0], np.cumsum(seg)])
     t = np.linspace(0, c[-1], n)
     out = np.stack([np.interp(t, c, pts[:, k]) for k in range(3)], 1)
-    chord = length / (n - 1)
+    return _even_chords(out, length, both)
+
+
+def _even_chords(p: np.ndarray, length: float, both: bool) -> np.ndarray:
+    """``p`` nudged to chords of ``length / (n - 1)`` (position-based projection), the first
+    end held, and the last where ``both``."""
+    out = p.copy()
+    chord = length / (len(p) - 1)
+    first, last = p[0].copy(), p[-1].copy()
     for _ in range(300):
         d = np.diff(out, axis=0)
         size = np.linalg.norm(d, axis=1, keepdims=True)
         corr = 0.5 * (1 - chord / np.maximum(size, 1e-12)) * d
-        first, last = out[0].copy(), out[-1].copy()
         out[:-1] += corr
         out[1:] -= corr
         out[0] = first
@@ -232,6 +260,110 @@ def _crosses_itself(path: np.ndarray, step: float = 0.01) -> bool:
     idx = np.arange(len(q))
     apart = np.abs(idx[:, None] - idx[None]) * step > 0.06
     return bool((d[apart] < 0.025).any())
+
+
+def separate(
+    shapes: list[np.ndarray],
+    radii: list[float],
+    plugged: list[tuple[bool, bool]],
+    gap: float = 0.003,
+) -> list[np.ndarray]:
+    """The start shapes with every place where two of them would touch (within the sum of
+    their radii and ``gap``, on the rods densified to 5 mm) resolved by lifting one over the
+    other, smoothly over 12 cm: the one placed later, unless it is climbing out of its socket
+    there (its first or last 10 cm, plugged), then the earlier one bridges over the plug.  Such
+    places remain where a socket had to be taken near an earlier cable (every free one was).
+    A lifted shape's chords are evened out again to its length (plugged ends held)."""
+    out = [p.copy() for p in shapes]
+    lengths = [_arc(p) for p in shapes]
+    for _ in range(3):  # lift, even the chords out, and again where that undid a lift
+        for _ in range(6):  # a lift may meet a third cable
+            if not _lift_clashes(out, radii, plugged, lengths, gap):
+                break
+        for k, p in enumerate(out):
+            if abs(_arc(p) - lengths[k]) > 1e-3 * lengths[k]:
+                out[k] = _even_chords(p, lengths[k], plugged[k][1])
+    return out
+
+
+def _lift_clashes(
+    out: list[np.ndarray],
+    radii: list[float],
+    plugged: list[tuple[bool, bool]],
+    lengths: list[float],
+    gap: float,
+) -> bool:
+    """One pass of :func:`separate`'s lifts, in place; whether anything was lifted."""
+    moved = False
+    dense = [_dense(p) for p in out]
+    for j in range(len(out)):
+        for i in range(j):
+            need = radii[i] + radii[j] + gap
+            (a, va), (b, vb) = dense[i], dense[j]
+            lo, hi = np.maximum(a.min(0), b.min(0)), np.minimum(a.max(0), b.max(0))
+            if (lo - hi > need).any():  # bounding boxes apart
+                continue
+            d = np.linalg.norm(a[:, None] - b[None], axis=2)
+            ki, kj = np.nonzero(d < need)
+            if len(ki) == 0:
+                continue
+            ki, kj = va[ki], vb[kj]  # the nearest vertices
+            s_j = _arc_positions(out[j])[kj]
+            near = LEAD + CLIMB  # near its socket: the plug holds it, lift the other one
+            climbing = (plugged[j][0] & (s_j < near)) | (plugged[j][1] & (s_j > lengths[j] - near))
+            pairs = ((j, i, kj[~climbing], ki[~climbing]), (i, j, ki[climbing], kj[climbing]))
+            for lift, over, k_l, k_o in pairs:
+                rises: dict[int, float] = {}
+                for kl, ko in zip(k_l.tolist(), k_o.tolist(), strict=True):
+                    rise = out[over][ko, 2] + need - out[lift][kl, 2]
+                    rises[kl] = max(rises.get(kl, 0.0), rise)
+                for kl, rise in rises.items():
+                    if rise > 0:
+                        _bump(out[lift], kl, rise, plugged[lift])
+                        moved = True
+            if moved:
+                dense[i], dense[j] = _dense(out[i]), _dense(out[j])
+    return moved
+
+
+def _dense(p: np.ndarray, step: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
+    """Points along polyline ``p`` at most ``step`` apart, and the nearest vertex of each."""
+    pts, owner = [p[:1]], [np.array([0])]
+    for k in range(len(p) - 1):
+        n = max(1, int(np.ceil(np.linalg.norm(p[k + 1] - p[k]) / step)))
+        t = np.arange(1, n + 1)[:, None] / n
+        pts.append(p[k] + t * (p[k + 1] - p[k]))
+        owner.append(np.where(t[:, 0] < 0.5, k, k + 1))
+    return np.concatenate(pts), np.concatenate(owner)
+
+
+def _arc_positions(p: np.ndarray) -> np.ndarray:
+    return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+
+
+def _bump(p: np.ndarray, k: int, rise: float, plugged: tuple[bool, bool]) -> None:
+    """Raise shape ``p`` around vertex ``k`` by ``rise`` (smoothly to nothing 6 cm away along
+    it), leaving a plugged end where it is."""
+    if rise <= 0:
+        return
+    s = _arc_positions(p)
+    u = np.clip(1 - np.abs(s - s[k]) / 0.06, 0.0, 1.0)
+    w = u * u * (3 - 2 * u)
+    if plugged[0]:
+        w[0] = 0.0
+    if plugged[1]:
+        w[-1] = 0.0
+    p[:, 2] = np.maximum(p[:, 2], p[:, 2] + rise * w)
+
+
+def _near(path: np.ndarray, points: list[tuple[float, float]]) -> bool:
+    """Whether the plan-view path passes within ``SOCKET_CLEARANCE`` of one of ``points`` (the
+    plugged ends of the cables placed before, which climb from their sockets' height)."""
+    if not points:
+        return False
+    q = _resample2(path, 0.005)
+    p = np.asarray(points, float)
+    return bool((np.linalg.norm(q[:, None] - p[None], axis=2) < SOCKET_CLEARANCE).any())
 
 
 def table_xml(cfg: SceneConfig, hoses: list) -> tuple[str, str]:

@@ -47,8 +47,10 @@ class _Pusher:
         n = 0
         while not self.stop.is_set():
             stamp = time.monotonic() - self.t0
-            self.feed.push(*_frame(n), stamp)
+            # listed before it is pushed: the camera may hand the frame over before this
+            # thread runs again (a CI run under load read a stamp the list did not hold yet)
             self.stamps.append(stamp)
+            self.feed.push(*_frame(n), stamp)
             n += 1
             self.stop.wait(self.period + (self.stall if n == self.stall_at else 0.0))
 
