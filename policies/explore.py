@@ -373,7 +373,8 @@ class Exploration:
             if nxt is None:
                 res.stop_reason = "no further reachable proposal"
                 break
-            self.segment = front_segment(nxt, self.depth) if cfg.front_filter else nxt
+            front = cfg.front_filter and self.session.surface.faces_camera  # not the table
+            self.segment = front_segment(nxt, self.depth) if front else nxt
         if not res.stop_reason:
             res.stop_reason = "done"
         return res

@@ -31,7 +31,10 @@ class Surface:
     ``FINGERTIP_CLEARANCE`` above it; ``lift``: how far the hand lifts the grasped cable off
     the surface (along -approach) before the actions, so that the fingertips do not drag on
     it (measured on the table without it: the pads' friction on the mat held the hand 16 mm
-    short of an action's target)."""
+    short of an action's target); ``faces_camera``: the surface lies behind the cables along
+    the camera's view, so the nearest depths of a proposed segment are the cable's (the board;
+    the exploration's ``front_filter`` relies on it), not the table seen obliquely, where depth
+    runs along a lying cable."""
 
     name: str
     approach: tuple[float, float, float]
@@ -40,6 +43,7 @@ class Surface:
     in_plane: bool = False
     height: float | None = None
     lift: float = 0.0
+    faces_camera: bool = False
 
     def grasp_centre(self, centre: np.ndarray) -> np.ndarray:
         """``centre`` (world), raised where the fingertips would otherwise touch the surface."""
@@ -49,7 +53,7 @@ class Surface:
         return c
 
 
-BOARD = Surface("board", (1.0, 0.0, 0.0), ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)))
+BOARD = Surface("board", (1.0, 0.0, 0.0), ((0.0, 1.0, 0.0), (0.0, 0.0, 1.0)), faces_camera=True)
 #: the table's top lies at z = 0, the simulated mat's at 0.5 mm (cablesim.sim.table.MAT_TOP)
 TABLE = Surface(
     "table",

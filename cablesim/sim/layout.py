@@ -27,6 +27,7 @@ import numpy as np
 from cablesim.cables import GARDEN_HOSE, CableKind
 from cablesim.seeding import stream
 from cablesim.sim.config import SceneConfig, hose_vertex_count
+from cablesim.sim.table import place_on_table, separate, socket_point
 
 FEMALE_LENGTH = 0.05  # the female coupling on a hose end (mesh length)
 FEMALE_OVERLAP = 0.014  # how far the coupling overlaps the male thread
@@ -71,8 +72,6 @@ def attach_point(cfg: SceneConfig, connector: int) -> np.ndarray:
     """World position where a hose end sits on a connector (the coupling's outer end; on the
     table, the plug's front end)."""
     if cfg.surface == "table":
-        from cablesim.sim.table import socket_point
-
         return socket_point(cfg, connector)
     y, z = cfg.board.connectors[connector]
     x = cfg.board.x - cfg.board.connector_length + FEMALE_OVERLAP - FEMALE_LENGTH
@@ -117,8 +116,6 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
         rank = int(bulge_rank[i])
         shape = None
         if cfg.surface == "table":
-            from cablesim.sim.table import place_on_table
-
             ends, bulge, floor, shape = place_on_table(
                 cfg, rng, free, float(lengths[i]), cable, rank, r_max, h.count - i - 1,
                 [s.shape for s in specs if s.shape is not None],
@@ -148,8 +145,6 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
             )
         )
     if cfg.surface == "table":  # lift one cable over another where their start shapes touch
-        from cablesim.sim.table import separate
-
         shapes = separate(
             [s.shape for s in specs],  # type: ignore[misc]
             [s.radius for s in specs],

@@ -1,7 +1,9 @@
 """The table-top scene (``SceneConfig.surface = "table"``): cables lying and crossing on a mat
 on the table, the first end of each plugged into a socket on the table, the far end plugged
-into another socket or free.  Pure NumPy (the MJCF is text), like :mod:`cablesim.sim.layout`,
-which calls :func:`place_on_table` for each cable and :func:`socket_point` for each end.
+into another socket or free.  Pure NumPy, like :mod:`cablesim.sim.layout`, which calls
+:func:`place_on_table` for each cable, :func:`separate` on their start shapes and
+:func:`socket_point` for each end (the MJCF of the mat and the sockets is built in
+:mod:`cablesim.sim.world`).
 
 A start shape leaves its socket along the socket's yaw, climbs within the first few
 centimetres to its own height (cable ``rank`` r lies at ``radius + 2 mm + r (2.2 r_max + 2 mm)``
@@ -21,7 +23,7 @@ import math
 import numpy as np
 
 from cablesim.cables import CableKind
-from cablesim.sim.config import SceneConfig, TableConfig
+from cablesim.sim.config import SceneConfig, TableConfig, hose_vertex_count
 
 LEAD = 0.06  # m: a start shape leaves its socket straight for this long
 CLIMB = 0.04  # m: and reaches its own height within this arc length
@@ -65,8 +67,6 @@ def place_on_table(
     (``n_vertices`` x 3), all drawn from ``rng``.  ``earlier``: the start shapes placed before
     it; a socket they pass within 5 cm of is taken only when no other is free, and this
     cable's path keeps 5 cm from their sockets (where they climb to their heights)."""
-    from cablesim.sim.config import hose_vertex_count
-
     t = cfg.table
     earlier = earlier or []
     used = [(float(p[0, 0]), float(p[0, 1])) for p in earlier]
@@ -364,62 +364,3 @@ def _near(path: np.ndarray, points: list[tuple[float, float]]) -> bool:
     q = _resample2(path, 0.005)
     p = np.asarray(points, float)
     return bool((np.linalg.norm(q[:, None] - p[None], axis=2) < SOCKET_CLEARANCE).any())
-
-
-def table_xml(cfg: SceneConfig, hoses: list) -> tuple[str, str]:
-    """(assets, world geoms) of the table scene: the mat under the cable region (with the
-    table's ``background``), a socket at every connector and a plug on every plugged end."""
-    from cablesim.sim import assets
-
-    t = cfg.table
-
-    def fmt(v) -> str:
-        return " ".join(f"{float(x):.9g}" for x in np.ravel(v))
-
-    x0, x1, y0, y1 = t.region
-    m = t.mat_margin
-    if t.background == "solid":
-        mat = f'<material name="mat" rgba="{fmt(t.solid_rgb)} 1" specular="0.05"/>'
-    else:
-        mat = (
-            f'<texture name="mat_tex" type="2d" file="{assets.texture_path(t.background)}"/>'
-            '<material name="mat" texture="mat_tex" texrepeat="1 1" specular="0.05"/>'
-        )
-    mat += '<material name="socket" rgba="0.12 0.12 0.13 1" specular="0.2"/>'
-    geoms = [
-        f'<geom name="mat" type="box" size="{(x1 - x0) / 2 + m:.6g} {(y1 - y0) / 2 + m:.6g} '
-        f'{MAT_TOP / 2}" pos="{(x0 + x1) / 2:.6g} {(y0 + y1) / 2:.6g} {MAT_TOP / 2}" '
-        'material="mat" friction="0.8"/>'
-    ]
-    hz = (t.socket_height + 0.012) / 2  # the socket box reaches 12 mm above a plug's centre
-    for i, (x, y, yaw) in enumerate(t.connectors):
-        d = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-        centre = np.array([x, y, hz]) - d * SOCKET_HALF[0]  # behind its mouth at (x, y)
-        quat = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
-        geoms.append(
-            f'<geom name="socket{i}" type="box" size="{SOCKET_HALF[0]} {SOCKET_HALF[1]} {hz:.6g}" '
-            f'pos="{fmt(centre)}" quat="{fmt(quat)}" material="socket"/>'
-        )
-    for s in hoses:
-        for k, c in enumerate(s.ends):
-            d = socket_direction(t, c)
-            end = socket_point(cfg, c)
-            mid = end - d * PLUG_LENGTH / 2
-            # a cylinder along the socket's yaw: its z axis turned onto d
-            quat = _quat_z_to(d)
-            rgb = np.clip(np.array(s.rgb) * 0.7 + 0.15, 0, 1)
-            geoms.append(
-                f'<geom name="{s.name}_plug{k}" type="cylinder" '
-                f'size="{max(1.6 * s.radius, 0.004):.6g} {PLUG_LENGTH / 2:.6g}" pos="{fmt(mid)}" '
-                f'quat="{fmt(quat)}" rgba="{fmt(rgb)} 1" contype="0" conaffinity="0"/>'
-            )
-    return mat, "\n    ".join(geoms)
-
-
-def _quat_z_to(d: np.ndarray) -> tuple[float, float, float, float]:
-    """The rotation (w, x, y, z) taking the z axis onto the horizontal unit vector ``d``."""
-    # z -> d: rotate by 90 degrees about the axis z x d
-    axis = np.cross([0.0, 0.0, 1.0], d)
-    axis /= np.linalg.norm(axis)
-    s = math.sin(math.pi / 4)
-    return (math.cos(math.pi / 4), axis[0] * s, axis[1] * s, axis[2] * s)

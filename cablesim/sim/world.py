@@ -45,7 +45,7 @@ from cablesim.sim.layout import (
     start_shape,
 )
 from cablesim.sim.settle import settle_world
-from cablesim.sim.table import table_xml
+from cablesim.sim.table import MAT_TOP, PLUG_LENGTH, SOCKET_HALF, socket_direction, socket_point
 
 CAMERA_NAME = "rgbd"
 _WARNINGS = (
@@ -155,7 +155,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     R = look_at_frame(cam.position, cam.look_at)
     flexes, equalities = [], []
     if cfg.surface == "table":
-        board_mat, board_geoms = table_xml(cfg, hoses)
+        board_mat, board_geoms = _table_xml(cfg, hoses)
     else:
         board_mat, board_geoms = _board_xml(cfg, hoses)
     light = _lighting(cfg)
@@ -271,6 +271,61 @@ def _board_xml(cfg: SceneConfig, hoses: list[HoseSpec]) -> tuple[str, str]:
                 f'contype="0" conaffinity="0"/>'
             )
     return mat, "\n    ".join(geoms)
+
+
+def _table_xml(cfg: SceneConfig, hoses: list) -> tuple[str, str]:
+    """(assets, world geoms) of the table scene: the mat under the cable region (with the
+    table's ``background``), a socket at every connector and a plug on every plugged end."""
+    t = cfg.table
+    fmt = _fmt
+
+    x0, x1, y0, y1 = t.region
+    m = t.mat_margin
+    if t.background == "solid":
+        mat = f'<material name="mat" rgba="{fmt(t.solid_rgb)} 1" specular="0.05"/>'
+    else:
+        mat = (
+            f'<texture name="mat_tex" type="2d" file="{assets.texture_path(t.background)}"/>'
+            '<material name="mat" texture="mat_tex" texrepeat="1 1" specular="0.05"/>'
+        )
+    mat += '<material name="socket" rgba="0.12 0.12 0.13 1" specular="0.2"/>'
+    geoms = [
+        f'<geom name="mat" type="box" size="{(x1 - x0) / 2 + m:.6g} {(y1 - y0) / 2 + m:.6g} '
+        f'{MAT_TOP / 2}" pos="{(x0 + x1) / 2:.6g} {(y0 + y1) / 2:.6g} {MAT_TOP / 2}" '
+        'material="mat" friction="0.8"/>'
+    ]
+    hz = (t.socket_height + 0.012) / 2  # the socket box reaches 12 mm above a plug's centre
+    for i, (x, y, yaw) in enumerate(t.connectors):
+        d = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        centre = np.array([x, y, hz]) - d * SOCKET_HALF[0]  # behind its mouth at (x, y)
+        quat = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        geoms.append(
+            f'<geom name="socket{i}" type="box" size="{SOCKET_HALF[0]} {SOCKET_HALF[1]} {hz:.6g}" '
+            f'pos="{fmt(centre)}" quat="{fmt(quat)}" material="socket"/>'
+        )
+    for s in hoses:
+        for k, c in enumerate(s.ends):
+            d = socket_direction(t, c)
+            end = socket_point(cfg, c)
+            mid = end - d * PLUG_LENGTH / 2
+            # a cylinder along the socket's yaw: its z axis turned onto d
+            quat = _quat_z_to(d)
+            rgb = np.clip(np.array(s.rgb) * 0.7 + 0.15, 0, 1)
+            geoms.append(
+                f'<geom name="{s.name}_plug{k}" type="cylinder" '
+                f'size="{max(1.6 * s.radius, 0.004):.6g} {PLUG_LENGTH / 2:.6g}" pos="{fmt(mid)}" '
+                f'quat="{fmt(quat)}" rgba="{fmt(rgb)} 1" contype="0" conaffinity="0"/>'
+            )
+    return mat, "\n    ".join(geoms)
+
+
+def _quat_z_to(d: np.ndarray) -> tuple[float, float, float, float]:
+    """The rotation (w, x, y, z) taking the z axis onto the horizontal unit vector ``d``."""
+    # z -> d: rotate by 90 degrees about the axis z x d
+    axis = np.cross([0.0, 0.0, 1.0], d)
+    axis /= np.linalg.norm(axis)
+    s = math.sin(math.pi / 4)
+    return (math.cos(math.pi / 4), axis[0] * s, axis[1] * s, axis[2] * s)
 
 
 def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose]) -> None:

@@ -29,7 +29,8 @@ def _arc(p: np.ndarray) -> float:
 
 
 def _min_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """Smallest distance between the vertices of two polylines densified to 5 mm."""
+    """Smallest distance between two polylines, both densified to 5 mm."""
+    from scipy.spatial import cKDTree
 
     def dense(p: np.ndarray) -> np.ndarray:
         out = [p[:1]]
@@ -38,15 +39,14 @@ def _min_distance(a: np.ndarray, b: np.ndarray) -> float:
             out.append(u + (np.arange(1, n + 1)[:, None] / n) * (v - u))
         return np.concatenate(out)
 
-    da, db = dense(a), dense(b)
-    return float(np.linalg.norm(da[:, None] - db[None], axis=2).min())
+    return float(cKDTree(dense(b)).query(dense(a))[0].min())
 
 
 # ---------------------------------------------------------------------- layout (no physics)
 @pytest.mark.parametrize("kind", ["garden_hose", "thin_wire", "rope"])
 def test_start_shapes_lie_apart_on_the_table_with_their_lengths_and_sockets(kind: str) -> None:
     plugged_far, free_far = 0, 0
-    for seed in range(8):
+    for seed in range(6):
         cfg = table(seed, **{"hoses.kind": kind, "hoses.count": 5})
         specs = sample_hoses(cfg)
         shapes = [start_shape(cfg, s) for s in specs]
@@ -116,7 +116,7 @@ def test_a_mixed_table_scene_round_trips_through_config_json() -> None:
 def test_the_scene_flag_writes_the_surface(capsys) -> None:
     assert main(["episode", "--scene", "table", "--seed", "3", "--show-config"]) == 0
     out = capsys.readouterr().out
-    assert 'scene.surface = "table"' in out and 'scene.camera.position = null' in out
+    assert 'scene.surface = "table"' in out and "scene.camera.position = null" in out
     assert main(["benchmark", "thesis", "--scene", "table", "--show-config"]) == 0
     assert 'scene.surface = "table"' in capsys.readouterr().out
 
