@@ -89,7 +89,9 @@ class ExploreConfig(Config):
     flow: str = "dis"
     merge: str = "dis"
     merged_votes: int = 1  # a pixel is in the merged mask with at least this many votes
-    front_filter: bool = True  # keep the front-most part (depth) of a proposed segment
+    # keep the front-most part (depth) of a proposed segment (on a surface that faces the
+    # camera: the board; cablesim.episode.surface.Surface.faces_camera)
+    front_filter: bool = True
     # grow each mask along the target frame's colour (``cablesim.perception.refine.GrowParams``
     # colour, CIELAB distance); None: off (the default: it relies on distinctly coloured hoses)
     grow_colour: float | None = None

@@ -39,6 +39,7 @@ from scipy import ndimage
 
 from cablesim.config import to_dict
 from cablesim.episode import primitives as prim
+from cablesim.episode.surface import BOARD, Surface
 from cablesim.errors import InputError, PhysicsDivergedError, SceneError
 from cablesim.evaluation import scores_dict
 from cablesim.formats.mcor import write_mcor, write_multigrasp
@@ -206,16 +207,18 @@ class ExplorationResult:
 
 
 # ---------------------------------------------------------------------- helpers
-def grasp_reachability(robot: Any, T_world_camera: np.ndarray, cfg: Any) -> Callable:
+def grasp_reachability(
+    robot: Any, T_world_camera: np.ndarray, cfg: Any, surface: Surface = BOARD
+) -> Callable:
     """The sampler's reachability callback: :func:`~cablesim.episode.primitives.check_interaction`
-    on the grasp built from a camera-frame (centre, axis) of a proposal."""
+    on the grasp built from a camera-frame (centre, axis) of a proposal, on ``surface``."""
 
     T = np.asarray(T_world_camera, float)
     cfg = cfg.fitted()  # a session's config is fitted already; a bare one: the default cable
 
     def reachable(centre_cam: np.ndarray, axis_cam: np.ndarray) -> tuple[bool, str]:
         centre = prim.grasp_centre(T, centre_cam, cfg.grasp.surface_offset)
-        return prim.check_interaction(robot, centre, T[:3, :3] @ axis_cam, cfg, T)
+        return prim.check_interaction(robot, centre, T[:3, :3] @ axis_cam, cfg, T, surface)
 
     return reachable
 
@@ -311,7 +314,9 @@ class Exploration:
         self.interaction_cfg = session.interaction_config()
         self.T = np.asarray(session.T_world_camera, float)
         self.flow = make_flow(cfg.flow, **(flow_kwargs or {}))
-        self.reachable = grasp_reachability(session.robot, self.T, self.interaction_cfg)
+        self.reachable = grasp_reachability(
+            session.robot, self.T, self.interaction_cfg, session.surface
+        )
         self.sampler = GraspSampler(cfg.sampler, reachability=self.reachable)
         self.merger = VoteMerger(dis_target_flow() if cfg.merge == "dis" else None)
         self.baseline_rng = stream(session.cfg.seed, "baseline")
@@ -368,7 +373,8 @@ class Exploration:
             if nxt is None:
                 res.stop_reason = "no further reachable proposal"
                 break
-            self.segment = front_segment(nxt, self.depth) if cfg.front_filter else nxt
+            front = cfg.front_filter and self.session.surface.faces_camera  # not the table
+            self.segment = front_segment(nxt, self.depth) if front else nxt
         if not res.stop_reason:
             res.stop_reason = "done"
         return res

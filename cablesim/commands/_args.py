@@ -23,6 +23,7 @@ from cablesim.cables import CABLE_KINDS, DEFAULT_KIND, PATTERNS
 from cablesim.config import ConfigMigrationWarning, flatten, parse_value, replace_paths
 from cablesim.errors import ConfigError, InputError
 from cablesim.panda.description import VISUALS
+from cablesim.sim.config import SURFACES
 from cablesim.sim.settle import cache_dir
 
 T = TypeVar("T")
@@ -31,6 +32,7 @@ T = TypeVar("T")
 SCENE_FLAGS: Mapping[str, str] = {
     "seed": "seed",
     "draw": "draw",
+    "scene": "surface",
     "hoses": "hoses.count",
     "cable": "hoses.kind",
     "pattern": "hoses.pattern",
@@ -247,8 +249,20 @@ def add_pattern_argument(
     )
 
 
+def add_surface_argument(p: argparse.ArgumentParser) -> None:
+    """``--scene board|table``: cables hanging on the task board, or lying on the table."""
+    p.add_argument(
+        "--scene",
+        choices=SURFACES,
+        default=None,
+        help="board: cables hanging from a vertical task board (default); table: cables lying "
+        "and crossing on a table, grasped from above",
+    )
+
+
 def add_scene_arguments(p: argparse.ArgumentParser, seed_help: str = "scene seed") -> None:
     add_config_arguments(p)
+    add_surface_argument(p)
     p.add_argument("--seed", type=int, default=None, help=f"{seed_help} (default 0)")
     p.add_argument(
         "--draw",

@@ -25,6 +25,7 @@ from cablesim.commands._args import (
     add_cable_argument,
     add_config_arguments,
     add_pattern_argument,
+    add_surface_argument,
     build_config,
     show_config,
 )
@@ -36,6 +37,7 @@ FLAGS = {
     "width": "scene.width",
     "height": "scene.height",
     "hoses": "scene.hoses",
+    "scene": "scene.surface",
     "cable": "scene.cable",
     "pattern": "scene.pattern",
     "periods": "scene.periods",
@@ -75,6 +77,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--width", type=int)
     p.add_argument("--height", type=int)
     p.add_argument("--hoses", type=int)
+    add_surface_argument(p)
     add_cable_argument(p)
     add_pattern_argument(p)
     p.add_argument("--periods", type=int, help="periods per action (K_p)")

@@ -24,7 +24,11 @@ import json
 from pathlib import Path
 
 from cablesim.cables import CABLE_KINDS, PATTERNS
-from cablesim.commands._args import add_cable_argument, add_pattern_argument
+from cablesim.commands._args import (
+    add_cable_argument,
+    add_pattern_argument,
+    add_surface_argument,
+)
 from cablesim.errors import ConfigError
 from cablesim.files import OutputLock, write_text
 from cablesim.jobs import Job, execute, load_results, parse_range
@@ -41,6 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ray", help="run on Ray: auto, an address, or local")
     p.add_argument("--width", type=int, default=640)
     p.add_argument("--height", type=int, default=480)
+    add_surface_argument(p)
     add_cable_argument(p, default="drawn per cable from every kind")
     add_pattern_argument(p, default="drawn per cable from every pattern", kind_choice=True)
     p.add_argument("--periods", type=int, default=None, help="periods per action (1 clip, 3 mcor)")
@@ -91,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
     if args.layout == "movingcables" and b - a > 9999:
         raise ConfigError("--scenes", "a MovingCables split holds at most 9999 clips")
     scene = {"width": args.width, "height": args.height}
+    if args.scene is not None and args.scene != "board":  # (the jobs of board datasets as before)
+        scene["surface"] = args.scene
     kinds = (args.cable,) if args.cable is not None else tuple(CABLE_KINDS)
     patterns = {None: tuple(PATTERNS), "kind": ()}.get(args.pattern, (args.pattern,))
     jobs = dataset_jobs(

@@ -63,7 +63,12 @@ PULL_VERTEX_MASS = GARDEN_HOSE.mass_per_metre * GARDEN_HOSE.segment_length  # kg
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_scene_arguments(p)
     p.add_argument("--out", type=output_path, default=None, help="output directory (required)")
-    p.add_argument("--background", choices=BACKGROUNDS, default=None, help="board background")
+    p.add_argument(
+        "--background",
+        choices=BACKGROUNDS,
+        default=None,
+        help="the board's background, or the mat's on the table",
+    )
     p.add_argument("--hose", type=int, default=0, help="which hose to pull (default 0)")
     p.add_argument("--no-robot", action="store_true", help="leave the arm out of the scene")
     p.add_argument("--depth-noise", action="store_true", help="RealSense-like depth noise")
@@ -76,12 +81,17 @@ def scene_config(args: argparse.Namespace) -> SceneConfig:
         values["robot.enabled"] = False
     if args.depth_noise:
         values["camera.depth_noise"] = True
-    flags = {**SCENE_FLAGS, "background": "board.background"}
-    return build_config(SceneConfig, args, flags, values, section="config")
+    cfg = build_config(SceneConfig, args, SCENE_FLAGS, values, section="config")
+    set_paths = {a.partition("=")[0].strip() for a in getattr(args, "set", None) or []}
+    path = f"{cfg.surface}.background"  # the board's, or the table mat's
+    if args.background is not None and path not in set_paths:  # (--set wins over a flag)
+        cfg = cfg.with_values({path: args.background})
+    return cfg
 
 
 def pull_hose(world, hose_index: int, distance: float, duration: float) -> dict:
-    """Pull the middle vertex of a hose ``distance`` sideways (along the board, +y) with a
+    """Pull the middle vertex of a hose ``distance`` sideways (+y: along the board, or across
+    the table) with a
     damped spring force for ``duration`` seconds of physics; the pull is still on at the end."""
     m, d = world.model, world.data
     hose = world.hoses[hose_index]
@@ -129,7 +139,8 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     print(
         f"[scene] building seed {cfg.seed}: {cfg.hoses.count} hoses, "
-        f"{cfg.board.background} board, robot {'on' if cfg.robot.enabled else 'off'}",
+        f"{getattr(cfg, cfg.surface).background} {cfg.surface}, "
+        f"robot {'on' if cfg.robot.enabled else 'off'}",
         flush=True,
     )
     world = World.build(cfg, settle=False)

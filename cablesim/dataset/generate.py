@@ -67,6 +67,8 @@ def scene_from(params: dict[str, Any]) -> SceneConfig:
         values["hoses.kind"] = str(size["cable"])
     if "pattern" in size:
         values["hoses.pattern"] = str(size["pattern"])
+    if "surface" in size:
+        values["surface"] = str(size["surface"])
     base = SceneConfig().with_values(values)
     if params.get("randomize", False):
         r = dict(params["randomize"]) if isinstance(params["randomize"], dict) else {}

@@ -65,8 +65,9 @@ def randomize_scene(seed: int, base: SceneConfig, r: Randomization | None = None
     r = r or Randomization()
     rng = stream(seed, "dataset")
     values: dict[str, object] = {"seed": int(seed)}
-    values["board.background"] = r.backgrounds[int(rng.integers(len(r.backgrounds)))]
-    values["board.solid_rgb"] = tuple(float(x) for x in rng.uniform(0.2, 0.85, 3))
+    # the background of what holds the cables: the board's, or the mat's on the table
+    values[f"{base.surface}.background"] = r.backgrounds[int(rng.integers(len(r.backgrounds)))]
+    values[f"{base.surface}.solid_rgb"] = tuple(float(x) for x in rng.uniform(0.2, 0.85, 3))
     values["hoses.count"] = int(rng.integers(r.hoses[0], r.hoses[1] + 1))
     if rng.random() < r.random_colours:
         values["hoses.colors"] = tuple(

@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from cablesim.episode.config import ActionConfig, GraspConfig, InteractionConfig, RetreatConfig
+from cablesim.episode.surface import BOARD, Surface
 from cablesim.outcomes import Outcome
 from cablesim.panda.description import RETRACT_QPOS
 from cablesim.pose import Pose, grasp_pose
@@ -37,7 +38,7 @@ from cablesim.robot.dry_run import DryRunRobot
 from cablesim.robot.grasping import avoiding_hoses, move_joints_safely
 
 #: The default approach: the hand points at the board (world +x); the board normal is -x.
-DEFAULT_APPROACH = (1.0, 0.0, 0.0)
+DEFAULT_APPROACH = BOARD.approach
 
 HosePointProbe = Callable[[], np.ndarray]
 
@@ -83,20 +84,23 @@ def action_direction(
     name: str,
     axis_world: np.ndarray,
     T_world_camera: np.ndarray,
-    approach: Sequence[float] = DEFAULT_APPROACH,
+    surface: Surface = BOARD,
 ) -> np.ndarray:
-    """Unit world direction of a named action (SPEC 3.3).
+    """Unit world direction of a named action (SPEC 3.3) on ``surface`` (normal n =
+    -approach: the board's faces the camera, the table's points up).
 
-    - ``along``: the hose axis projected onto the image plane (camera z removed);
-    - ``across``: perpendicular to ``along`` in the board plane (board normal = -approach);
-    - ``normal``: the board normal (towards the camera); ``vertical``: world z;
-      ``horizontal``: in the board plane, perpendicular to world z.
+    - ``along``: the hose axis projected onto the image plane (camera z removed), or onto the
+      surface's plane where the surface says so (``Surface.in_plane``: the table, seen
+      obliquely from above, where the image plane's direction would push into the table);
+    - ``across``: perpendicular to ``along`` in the surface's plane;
+    - ``normal``: the surface normal; ``vertical``: world z;
+      ``horizontal``: in the surface's plane, perpendicular to world z.
     """
-    n = -_unit(approach)
+    n = -_unit(surface.approach)
     R = np.asarray(T_world_camera, dtype=float)[:3, :3]
     a_cam = R.T @ _unit(axis_world)
     a_cam[2] = 0.0
-    if np.linalg.norm(a_cam) < 1e-6:  # axis along the optical axis: use the board plane
+    if surface.in_plane or np.linalg.norm(a_cam) < 1e-6:  # (axis along the optical axis)
         along = axis_world - np.dot(axis_world, n) * n
     else:
         along = R @ a_cam
@@ -110,6 +114,8 @@ def action_direction(
     if name == "vertical":
         return np.array([0.0, 0.0, 1.0])
     if name == "horizontal":
+        if abs(n[2]) > 0.99:  # a horizontal surface: across the hose in its plane
+            return _unit(np.cross(n, along))
         return _unit(np.cross(n, [0.0, 0.0, 1.0]))
     raise ValueError(f"unknown action direction {name!r}")
 
@@ -118,10 +124,10 @@ def action_directions(
     cfg: ActionConfig,
     axis_world: np.ndarray,
     T_world_camera: np.ndarray,
-    approach: Sequence[float] = DEFAULT_APPROACH,
+    surface: Surface = BOARD,
 ) -> list[tuple[str, np.ndarray]]:
     """(label, unit world direction) of every configured action, in order."""
-    out = [(d, action_direction(d, axis_world, T_world_camera, approach)) for d in cfg.directions]
+    out = [(d, action_direction(d, axis_world, T_world_camera, surface)) for d in cfg.directions]
     out += [(f"vector{i}", _unit(v)) for i, v in enumerate(cfg.extra_directions)]
     return out
 
@@ -145,15 +151,18 @@ def check_interaction(
     axis: np.ndarray,
     cfg: InteractionConfig,
     T_world_camera: np.ndarray,
-    approach: Sequence[float] = DEFAULT_APPROACH,
+    surface: Surface = BOARD,
 ) -> tuple[bool, str]:
-    """Whether an interaction at world ``centre``/``axis`` is reachable without moving: the
-    grasp and pre-grasp poses and, for a grasp, every action's end points g1 +- D."""
+    """Whether an interaction at world ``centre``/``axis`` on ``surface`` is reachable without
+    moving: the grasp and pre-grasp poses and, for a grasp, every action's end points g1 +- D
+    (``centre`` raised where the fingertips would touch the surface)."""
+    centre = surface.grasp_centre(centre)
+    approach = surface.approach
     g, why = choose_grasp_pose(robot, centre, axis, approach, cfg.grasp.pregrasp_offset)
     if g is None:
         return False, why
     if cfg.kind == "grasp":
-        for label, u in action_directions(cfg.actions, axis, T_world_camera, approach):
+        for label, u in action_directions(cfg.actions, axis, T_world_camera, surface):
             for s in (1.0, -1.0):
                 ok, why = robot.check_reachable(g.translated(s * cfg.actions.amplitude * u))
                 if not ok:
@@ -167,9 +176,9 @@ def plan_interaction(
     axis: np.ndarray,
     cfg: InteractionConfig,
     T_world_camera: np.ndarray,
-    approach: Sequence[float] = DEFAULT_APPROACH,
+    surface: Surface = BOARD,
 ) -> tuple[bool, str]:
-    """Whether the interaction's motions plan, without moving: the grasp approach (retract,
+    """Whether the interaction's motions on ``surface`` plan, without moving: the grasp approach (retract,
     stand-off, straight lines in) and one period of every action, stroke by stroke, on a
     :class:`~cablesim.robot.dry_run.DryRunRobot` of ``robot`` (its arm model, from its current
     joints; IK along each line, limits, collisions, branch jumps).  Stricter than
@@ -178,9 +187,10 @@ def plan_interaction(
     converge at 100% of the line" on the first stroke).  Robots without an arm model get
     :func:`check_interaction`."""
 
-    ok, why = check_interaction(robot, centre, axis, cfg, T_world_camera, approach)
+    ok, why = check_interaction(robot, centre, axis, cfg, T_world_camera, surface)
     if not ok or not hasattr(robot, "arm"):
         return ok, why
+    centre, approach = surface.grasp_centre(centre), surface.approach
     dry = DryRunRobot(robot)
     grasp_cfg = dataclasses.replace(cfg.grasp, retries=0)
     if cfg.kind == "push":
@@ -188,13 +198,19 @@ def plan_interaction(
         directions = [("push", np.asarray(approach, float))]
     else:
         g = grasp_at(dry, centre, axis, grasp_cfg, approach)
-        directions = action_directions(cfg.actions, axis, T_world_camera, approach)
+        directions = action_directions(cfg.actions, axis, T_world_camera, surface)
     if not g or g.pose is None:
         return False, f"planned {g.reason}"
+    g1 = g.pose
+    if surface.lift > 0 and cfg.kind == "grasp":
+        g1 = g1.translated(-surface.lift * _unit(approach))
+        r = dry.move_to(g1, speed=cfg.grasp.approach_speed)
+        if not r:
+            return False, f"planned lift: {r.reason}"
     a = cfg.actions
     for label, u in directions:
         depth = cfg.push_depth if cfg.kind == "push" else a.amplitude
-        way = periodic_waypoints(g.pose, u, depth, 1, one_sided=cfg.kind == "push")
+        way = periodic_waypoints(g1, u, depth, 1, one_sided=cfg.kind == "push")
         r = _run_waypoints(dry, way, a.speed, f"planned action {label}")
         if not r:
             return False, r.reason

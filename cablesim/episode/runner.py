@@ -50,6 +50,7 @@ from cablesim.episode import primitives as prim
 from cablesim.episode.capture import ArmMaskFunction, FrameCollector
 from cablesim.episode.clock import Clock, Tick
 from cablesim.episode.config import InteractionConfig
+from cablesim.episode.surface import BOARD, Surface
 from cablesim.episode.truth import FrameSink, TruthProvider
 from cablesim.errors import InputError
 from cablesim.frames import LABEL_ROBOT, Stream
@@ -211,6 +212,7 @@ class InteractionOptions:
     | `park` | the joint configuration out of view used when `config.retreat.qpos` is None |
     | `arm_mask` | `(tick) -> HxW bool` for every frame's `arm_mask` (`ArmMasker.for_tick`) |
     | `retry_rng` | picks the side of the first grasp retry (`primitives.grasp_at`) |
+    | `surface` | what holds the cables (`cablesim.episode.surface`; default the board) |
     """
 
     sink: FrameSink | None = None
@@ -219,6 +221,7 @@ class InteractionOptions:
     park: Sequence[float] | None = None
     arm_mask: ArmMaskFunction | None = None
     retry_rng: np.random.Generator | None = None
+    surface: Surface | None = None
 
 
 @dataclass
@@ -238,7 +241,7 @@ class InteractionState:
     T: np.ndarray  # T_world_camera
     retreat_q: Sequence[float]
     result: InteractionResult
-    approach: np.ndarray = field(default_factory=lambda: np.asarray(prim.DEFAULT_APPROACH, float))
+    surface: Surface = BOARD
     collector: FrameCollector | None = None
     directions: list[tuple[str, np.ndarray]] = field(default_factory=list)
     t_start: float = field(default_factory=time.perf_counter)
@@ -272,7 +275,13 @@ class InteractionState:
             np.asarray(T, float),
             cfg.retreat.joint_target(park),
             InteractionResult(False, hose=opts.hose),
+            opts.surface or BOARD,
         )
+
+    @property
+    def approach(self) -> np.ndarray:
+        """The hand's approach direction (world): the surface's."""
+        return np.asarray(self.surface.approach, float)
 
     def fail(self, outcome: Outcome, reason: str) -> bool:
         """End the interaction as failed with ``outcome`` (False: for a phase to return)."""
@@ -290,7 +299,7 @@ class InteractionState:
                 self.robot,
                 self.retreat_q,
                 self.cfg.retreat,
-                prim.DEFAULT_APPROACH,
+                self.approach,
                 self.cfg.grasp.travel_speed,
             )
             if not r:
@@ -322,10 +331,11 @@ def grasp(s: InteractionState) -> bool:
     cfg, result = s.cfg, s.result
     assert result.centre is not None and result.axis is not None
     t0 = time.perf_counter()
+    centre = s.surface.grasp_centre(result.centre)  # the fingertips above a table
     if cfg.kind == "grasp":
         g = prim.grasp_at(
             s.robot,
-            result.centre,
+            centre,
             result.axis,
             cfg.grasp,
             s.approach,
@@ -333,7 +343,7 @@ def grasp(s: InteractionState) -> bool:
             rng=s.options.retry_rng,
         )
     else:
-        g = prim.approach_for_push(s.robot, result.centre, result.axis, cfg.grasp, s.approach)
+        g = prim.approach_for_push(s.robot, centre, result.axis, cfg.grasp, s.approach)
     result.timings["grasp"] = time.perf_counter() - t0
     result.details["grasp"] = g.details
     result.grasp_retries = int(g.details.get("retries", 0))
@@ -341,6 +351,12 @@ def grasp(s: InteractionState) -> bool:
         return s.abort(g.outcome, g.reason, moved=g.moved)
     result.grasp = g.pose
     assert g.pose is not None
+    if cfg.kind == "grasp" and s.surface.lift > 0:  # off the table before the actions
+        lifted = g.pose.translated(-s.surface.lift * s.approach)
+        r = s.robot.move_to(lifted, speed=cfg.grasp.approach_speed)
+        if not r:
+            return s.abort(Outcome.ACTION_FAILED, f"lift after the grasp: {r.reason}")
+        result.grasp = lifted  # the actions' centre g1
     verb = "grasped" if cfg.kind == "grasp" else "at"
     s.say(f"{verb} hose at {np.round(g.pose.position, 3)} ({jsonable(g.details)})")
     return True
@@ -363,7 +379,7 @@ def act(s: InteractionState) -> bool:
         s.T, cfg.capture.min_gripper_step, s.truth, s.options.sink, s.options.arm_mask
     )
     if cfg.kind == "grasp":
-        s.directions = prim.action_directions(cfg.actions, result.axis, s.T, s.approach)
+        s.directions = prim.action_directions(cfg.actions, result.axis, s.T, s.surface)
     else:
         s.directions = [("push", s.approach)]
     t0 = time.perf_counter()

@@ -17,6 +17,7 @@ from cablesim.cables import cable_kind
 from cablesim.camera.base import Camera, CameraImage
 from cablesim.episode.config import InteractionConfig
 from cablesim.episode.runner import InteractionOptions, InteractionResult, run_interaction
+from cablesim.episode.surface import BOARD, Surface
 from cablesim.panda.arm_mask import ArmMasker
 from cablesim.panda.description import PARK_QPOS
 from cablesim.progress import Say
@@ -64,6 +65,12 @@ class Session:
         """The joint configuration out of the camera's view."""
         return tuple(PARK_QPOS)
 
+    @property
+    def surface(self) -> Surface:
+        """What holds the cables (the approach, the actions' plane): the board's here; a
+        simulated session gives its scene's."""
+        return BOARD
+
     def capture(self) -> CameraImage:
         return self.camera.capture()
 
@@ -87,6 +94,7 @@ class Session:
             park=self.park,
             arm_mask=self.arm_masker(interaction),
             retry_rng=self.retry_rng,
+            surface=self.surface,
         )
         return run_interaction(
             self.robot, self.camera, self.clock, segment, interaction, self.truth, options

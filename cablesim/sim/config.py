@@ -1,9 +1,12 @@
-"""Typed, seeded, printable configuration of a simulated task-board scene and of a simulated
+"""Typed, seeded, printable configuration of a simulated scene and of a simulated
 interaction in it (:class:`EpisodeConfig`).
 
-Frame conventions (world, metres): table top at z = 0, x from the robot towards the board,
-z up.  The board's front face is the plane x = ``board.x``; connectors stick out of it towards
--x.  Every config is checked when it is made (:class:`cablesim.config.Config`): an impossible
+Two surfaces hold the cables (``SceneConfig.surface``): ``board``, cables hanging from
+couplings on a vertical task board (the thesis's set-up), and ``table``, cables lying and
+crossing on a mat on the table top, the first end of each plugged into a socket on the table
+(:class:`TableConfig`).  Frame conventions (world, metres): table top at z = 0, x from the
+robot towards the board, z up.  The board's front face is the plane x = ``board.x``;
+connectors stick out of it towards -x.  Every config is checked when it is made (:class:`cablesim.config.Config`): an impossible
 value is a ``ConfigError`` naming the field; configs are frozen (``replace`` and
 ``with_values`` make checked copies).
 
@@ -34,6 +37,15 @@ from cablesim.errors import ConfigError
 from cablesim.panda.description import JOINT_LIMITS, PARK_QPOS, check_visual
 
 BACKGROUNDS = ("wood", "bushes", "cables", "solid")
+#: What holds the cables: a vertical task board, or the table top (SceneConfig.surface).
+SURFACES = ("board", "table")
+#: Each surface's camera view, (position, look_at), where ``camera.position`` or
+#: ``camera.look_at`` is None.  The table's camera hangs above the robot's base and looks down
+#: (62 degrees) over the mat, so that the arm's base and its park pose stay out of view.
+SURFACE_VIEWS: Mapping[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
+    "board": ((-0.42, 0.0, 0.62), (0.62, 0.0, 0.46)),
+    "table": ((0.35, -0.42, 0.60), (0.35, -0.10, 0.0)),
+}
 
 # Sanity bounds that keep MuJoCo away from degenerate models (the table top is the box
 # x in [TABLE_X[0], TABLE_X[1]], |y| <= TABLE_HALF_WIDTH; see cablesim.sim.world).
@@ -111,6 +123,59 @@ class BoardConfig(Config):
             y, z = c
             if abs(y) > self.width / 2 or not (0 < z < self.height):
                 raise ConfigError(f"board.connectors[{i}]", f"({y}, {z}) is off the board")
+
+
+# Default sockets on the table: (x, y, yaw) of each, yaw the direction (radians about z) in
+# which a plugged cable leaves it; on three sides of the mat's cable region, 5 cm outside it.
+DEFAULT_TABLE_CONNECTORS: tuple[tuple[float, float, float], ...] = (
+    *((0.60, y, math.pi) for y in (-0.28, -0.12, 0.04)),
+    *((x, 0.15, -math.pi / 2) for x in (0.22, 0.36, 0.50)),
+    *((0.10, y, 0.0) for y in (-0.25, -0.05)),
+)
+
+
+@dataclass(frozen=True)
+class TableConfig(Config):
+    """The table-top scene (``SceneConfig.surface = "table"``): a mat on the table, cables
+    lying and crossing in ``region`` (x0, x1, y0, y1: where their start shapes wander), the
+    first end of each plugged into a socket (``connectors``: x, y and the yaw in which the
+    cable leaves), the far end plugged into another with ``hoses.both_ends_probability``,
+    else free.  The region's default lies where the Panda reaches the table from above."""
+
+    SECTION = "table"
+
+    region: tuple[float, float, float, float] = (0.15, 0.55, -0.35, 0.10)
+    connectors: tuple[tuple[float, float, float], ...] = DEFAULT_TABLE_CONNECTORS
+    socket_height: float = 0.02  # m: the plugged cable end's centre above the table
+    background: str = "wood"  # the mat's look: one of BACKGROUNDS
+    solid_rgb: tuple[float, float, float] = (0.55, 0.55, 0.58)  # used by "solid"
+    mat_margin: float = 0.12  # m: the mat reaches this far beyond the region
+
+    def _validate(self) -> None:
+        x0, x1, y0, y1 = check_vector("table.region", self.region, 4)
+        if not (x1 - x0 >= 0.1 and y1 - y0 >= 0.1):
+            raise ConfigError(
+                "table.region", f"(x0, x1, y0, y1) = {self.region}: need x1 - x0 and y1 - y0 >= 0.1"
+            )
+        if not (TABLE_X[0] <= x0 and x1 <= TABLE_X[1] and -TABLE_HALF_WIDTH <= y0):
+            raise ConfigError("table.region", f"{self.region} is not on the table")
+        if y1 > TABLE_HALF_WIDTH:
+            raise ConfigError("table.region", f"{self.region} is not on the table")
+        if self.background not in BACKGROUNDS:
+            raise ConfigError(
+                "table.background",
+                f"unknown background {self.background!r}; choose one of {BACKGROUNDS}",
+            )
+        for k, v in enumerate(check_vector("table.solid_rgb", self.solid_rgb, 3)):
+            check_number(f"table.solid_rgb[{k}]", v, 0.0, 1.0)
+        check_number("table.socket_height", self.socket_height, 0.005, 0.1)
+        check_number("table.mat_margin", self.mat_margin, 0.0, 0.5)
+        if not self.connectors:
+            raise ConfigError("table.connectors", "the table needs at least one socket")
+        for i, c in enumerate(self.connectors):
+            x, y, _ = check_vector(f"table.connectors[{i}]", c, 3, 2 * math.pi + 1e-9)
+            if not (TABLE_X[0] <= x <= TABLE_X[1] and abs(y) <= TABLE_HALF_WIDTH):
+                raise ConfigError(f"table.connectors[{i}]", f"({x}, {y}) is off the table")
 
 
 @dataclass(frozen=True)
@@ -361,8 +426,9 @@ class CameraConfig(Config):
     width: int = 640
     height: int = 480
     fovy: float = 58.0  # degrees, vertical field of view
-    position: tuple[float, float, float] = (-0.42, 0.0, 0.62)
-    look_at: tuple[float, float, float] = (0.62, 0.0, 0.46)
+    # None: the surface's view (SURFACE_VIEWS; SceneConfig.view() resolves it)
+    position: tuple[float, float, float] | None = None
+    look_at: tuple[float, float, float] | None = None
     position_jitter: float = 0.0  # metres, uniform per axis (randomised camera pose)
     look_at_jitter: float = 0.0
     depth_noise: bool = False
@@ -416,11 +482,14 @@ class CameraConfig(Config):
                 )
         if not 0 < self.near < self.far:
             raise ConfigError("camera.near", "need 0 < near < far")
-        pos = check_vector("camera.position", self.position, 3, WORLD_LIMIT)
-        look = check_vector("camera.look_at", self.look_at, 3, WORLD_LIMIT)
+        if self.position is not None:
+            check_vector("camera.position", self.position, 3, WORLD_LIMIT)
+        if self.look_at is not None:
+            check_vector("camera.look_at", self.look_at, 3, WORLD_LIMIT)
         check_number("camera.position_jitter", self.position_jitter, hi=1.0)
         check_number("camera.look_at_jitter", self.look_at_jitter, hi=1.0)
-        check_view("camera.look_at", pos, look, self.position_jitter + self.look_at_jitter)
+        # the view itself (the two points apart, not straight down) is checked by the scene,
+        # which knows the surface whose view stands in for None (SceneConfig.view)
 
         if (
             isinstance(self.sphere_stacks, bool)
@@ -588,7 +657,9 @@ class SceneConfig(Config):
 
     seed: int = 0
     draw: int = 0
+    surface: str = "board"  # what holds the cables: one of SURFACES
     board: BoardConfig = field(default_factory=BoardConfig)
+    table: TableConfig = field(default_factory=TableConfig)
     hoses: HoseConfig = field(default_factory=HoseConfig)
     camera: CameraConfig = field(default_factory=CameraConfig)
     robot: RobotConfig = field(default_factory=RobotConfig)
@@ -600,12 +671,38 @@ class SceneConfig(Config):
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
         if isinstance(self.draw, bool) or not isinstance(self.draw, int) or self.draw < 0:
             raise ConfigError("draw", f"must be a non-negative integer, got {self.draw!r}")
-        if self.hoses.count > len(self.board.connectors):
+        if self.surface not in SURFACES:
+            raise ConfigError(
+                "surface", f"unknown surface {self.surface!r}; choose one of {SURFACES}"
+            )
+        if self.hoses.count > self.connector_count():
             raise ConfigError(
                 "hoses.count",
                 f"{self.hoses.count} hoses need at least {self.hoses.count} connectors, "
-                f"the board has {len(self.board.connectors)}",
+                f"the {self.surface} has {self.connector_count()}",
             )
+        c = self.camera
+        check_view("camera.look_at", *self.view(), c.position_jitter + c.look_at_jitter)
+        if self.surface == "table" and self.hoses.max_diameter() / 2 > self.table.socket_height:
+            raise ConfigError(
+                "table.socket_height",
+                f"{self.table.socket_height} m is below the radius of the thickest cable "
+                f"({self.hoses.max_diameter() / 2:g} m)",
+            )
+
+    def view(self) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+        """The camera's (position, look_at) before any jitter: ``camera.position`` and
+        ``camera.look_at``, each the surface's (:data:`SURFACE_VIEWS`) where None."""
+        position, look_at = SURFACE_VIEWS[self.surface]
+        c = self.camera
+        return (
+            position if c.position is None else tuple(c.position),  # type: ignore[return-value]
+            look_at if c.look_at is None else tuple(c.look_at),  # type: ignore[return-value]
+        )
+
+    def connector_count(self) -> int:
+        """How many connectors (board) or sockets (table) the surface has."""
+        return len(self.board.connectors if self.surface == "board" else self.table.connectors)
 
 
 @dataclass(frozen=True)
@@ -656,6 +753,7 @@ EPISODE_SHORTCUTS: Mapping[str, str] = {
     "seed": "scene.seed",
     "draw": "scene.draw",
     "hoses": "scene.hoses.count",
+    "surface": "scene.surface",
     "width": "scene.camera.width",
     "height": "scene.camera.height",
     "robot_visual": "scene.robot.visual",
@@ -694,6 +792,12 @@ class EpisodeConfig(Config):
             raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
         if self.max_draws < 1:
             raise ConfigError("max_draws", f"must be an integer >= 1, got {self.max_draws!r}")
+        if self.scene.surface == "table" and self.interaction.kind == "push":
+            raise ConfigError(
+                "interaction.kind",
+                "push presses the closed hand along the approach, into the board; on the table "
+                "that is into the table top: use grasp (the default) there",
+            )
         if self.hose is not None and (
             isinstance(self.hose, bool)
             or not isinstance(self.hose, int)

@@ -1,6 +1,10 @@
 """Seeded scene layout: which connectors each hose uses, its length, colour, stiffness and
 start shape.  Pure NumPy, independent of MuJoCo, so it is cheap to test and to print.
 
+The board's layout is here; the table's (``SceneConfig.surface = "table"``) is in
+:mod:`cablesim.sim.table`: :func:`sample_hoses` draws what both share and asks the surface
+where each cable goes.
+
 A hose is attached at its first end to the coupling on connector ``ends[0]`` and, when
 ``len(ends) == 2``, at its far end to connector ``ends[1]``.  Start shapes hang in front of the
 board, each hose bulging out by its own distance (so no two start shapes intersect); what
@@ -16,13 +20,14 @@ cross at least one other hose (the thesis's clutter), re-drawing the scene when 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from cablesim.cables import GARDEN_HOSE, CableKind
 from cablesim.seeding import stream
 from cablesim.sim.config import SceneConfig, hose_vertex_count
+from cablesim.sim.table import place_on_table, separate, socket_point
 
 FEMALE_LENGTH = 0.05  # the female coupling on a hose end (mesh length)
 FEMALE_OVERLAP = 0.014  # how far the coupling overlaps the male thread
@@ -40,6 +45,9 @@ class HoseSpec:
     bulge: float  # metres in front of the connector tips
     floor: float  # height at which the part that reaches the table lies
     cable: CableKind = GARDEN_HOSE  # its kind's parameters, with the config's overrides
+    # the start shape where the surface draws it whole (the table), (n_vertices, 3); None:
+    # computed from the ends, bulge and floor (the board)
+    shape: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def both_ends(self) -> bool:
@@ -61,7 +69,10 @@ class CameraPose:
 
 
 def attach_point(cfg: SceneConfig, connector: int) -> np.ndarray:
-    """World position where a hose end sits on a connector (the coupling's outer end)."""
+    """World position where a hose end sits on a connector (the coupling's outer end; on the
+    table, the plug's front end)."""
+    if cfg.surface == "table":
+        return socket_point(cfg, connector)
     y, z = cfg.board.connectors[connector]
     x = cfg.board.x - cfg.board.connector_length + FEMALE_OVERLAP - FEMALE_LENGTH
     return np.array([x, y, z])
@@ -82,7 +93,7 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
     h = cfg.hoses
     cables = [h.cable(i) for i in range(h.count)]
     rng = layout_rng(cfg)
-    free = list(range(len(cfg.board.connectors)))
+    free = list(range(cfg.connector_count()))
     colour_order = rng.permutation(max(len(c.colors) for c in cables))
     specs = []
     lengths = rng.uniform(h.length[0], h.length[1], h.count)
@@ -102,33 +113,17 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
     r_max = max(c.radius for c in cables)
     for i in range(h.count):
         cable = cables[i]
-        a = free.pop(int(rng.integers(0, len(free))))
-        ends: tuple[int, ...] = (a,)
-        want_both = rng.random() < h.both_ends_probability
         rank = int(bulge_rank[i])
-        bulge = 0.012 + (2.4 * r_max + 0.004) * rank
-        floor = cable.radius + 0.004 + 2.6 * r_max * rank
-        if want_both:
-            pa = attach_point(cfg, a)
-            # side by side (a hose cannot hang as a loop between two connectors one above the
-            # other) and with some slack
-            ok = [
-                c
-                for c in free
-                if abs(attach_point(cfg, c)[1] - pa[1]) >= 0.12
-                and np.linalg.norm(attach_point(cfg, c) - pa) < 0.8 * lengths[i]
-            ]
-            # a hose attached at both ends must hang clear of the table
-            ok = [
-                c
-                for c in ok
-                if _lowest_point(pa, attach_point(cfg, c), lengths[i], bulge) > floor + 0.02
-            ]
-            # leave enough connectors for the hoses still to come
-            if ok and len(free) - 1 >= h.count - i - 1:
-                b = ok[int(rng.integers(0, len(ok)))]
-                free.remove(b)
-                ends = (a, b)
+        shape = None
+        if cfg.surface == "table":
+            ends, bulge, floor, shape = place_on_table(
+                cfg, rng, free, float(lengths[i]), cable, rank, r_max, h.count - i - 1,
+                [s.shape for s in specs if s.shape is not None],
+            )  # fmt: skip
+        else:
+            ends, bulge, floor = _place_on_board(
+                cfg, rng, free, float(lengths[i]), cable, rank, r_max, h.count - i - 1
+            )
         palette = cable.colors
         base = np.array(palette[int(colour_order[i % len(colour_order)]) % len(palette)], float)
         jitter = cable.color_jitter
@@ -146,16 +141,64 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
                 bulge=bulge,
                 floor=floor,
                 cable=cable,
+                shape=shape,
             )
         )
+    if cfg.surface == "table":  # lift one cable over another where their start shapes touch
+        shapes = separate(
+            [s.shape for s in specs],  # type: ignore[misc]
+            [s.radius for s in specs],
+            [(True, s.both_ends) for s in specs],
+        )
+        specs = [replace(s, shape=p) for s, p in zip(specs, shapes, strict=True)]
     return specs
+
+
+def _place_on_board(
+    cfg: SceneConfig,
+    rng: np.random.Generator,
+    free: list[int],
+    length: float,
+    cable: CableKind,
+    rank: int,
+    r_max: float,
+    to_come: int,
+) -> tuple[tuple[int, ...], float, float]:
+    """A hanging cable's connectors (taken from ``free``), its bulge out of the board and the
+    height at which what reaches the table lies, by its ``rank`` among the cables."""
+    a = free.pop(int(rng.integers(0, len(free))))
+    ends: tuple[int, ...] = (a,)
+    want_both = rng.random() < cfg.hoses.both_ends_probability
+    bulge = 0.012 + (2.4 * r_max + 0.004) * rank
+    floor = cable.radius + 0.004 + 2.6 * r_max * rank
+    if want_both:
+        pa = attach_point(cfg, a)
+        # side by side (a hose cannot hang as a loop between two connectors one above the
+        # other) and with some slack
+        ok = [
+            c
+            for c in free
+            if abs(attach_point(cfg, c)[1] - pa[1]) >= 0.12
+            and np.linalg.norm(attach_point(cfg, c) - pa) < 0.8 * length
+        ]
+        # a hose attached at both ends must hang clear of the table
+        ok = [
+            c for c in ok if _lowest_point(pa, attach_point(cfg, c), length, bulge) > floor + 0.02
+        ]
+        # leave enough connectors for the hoses still to come
+        if ok and len(free) - 1 >= to_come:
+            b = ok[int(rng.integers(0, len(ok)))]
+            free.remove(b)
+            ends = (a, b)
+    return ends, bulge, floor
 
 
 def sample_camera(cfg: SceneConfig) -> CameraPose:
     rng = stream(cfg.seed, "camera")
     c = cfg.camera
-    pos = np.asarray(c.position, float) + rng.uniform(-1, 1, 3) * c.position_jitter
-    look = np.asarray(c.look_at, float) + rng.uniform(-1, 1, 3) * c.look_at_jitter
+    position, look_at = cfg.view()
+    pos = np.asarray(position, float) + rng.uniform(-1, 1, 3) * c.position_jitter
+    look = np.asarray(look_at, float) + rng.uniform(-1, 1, 3) * c.look_at_jitter
     return CameraPose(pos, look)
 
 
@@ -239,6 +282,8 @@ def _lowest_point(pa: np.ndarray, pb: np.ndarray, length: float, bulge: float) -
 
 def start_shape(cfg: SceneConfig, spec: HoseSpec) -> np.ndarray:
     """(n_vertices, 3) start positions with (nearly) the hose's arc length between vertices."""
+    if spec.shape is not None:
+        return spec.shape.copy()
     pa = attach_point(cfg, spec.ends[0])
     if spec.both_ends:
         return _hanging_curve(

@@ -73,7 +73,8 @@ class NeighbourPerturbation:
             return
         cfg, rng = self.config, self.rng
         d = world.data
-        # board plane: the world y and z axes (the board's front face is at constant x)
+        # in the surface's plane: the board's world y and z axes, the table's x and y
+        e1, e2 = (np.asarray(a, float) for a in world.surface.plane)
         for h in self._targets(world):
             bodies = np.asarray(world.hoses[h].vertex_bodies)
             n = len(bodies)
@@ -83,7 +84,8 @@ class NeighbourPerturbation:
                 continue
             ks = rng.choice(free, size=min(cfg.points, len(free)), replace=False)
             angle = rng.uniform(0, 2 * math.pi)
-            e = np.array([0.0, math.cos(angle), math.sin(angle)])
+            e = math.cos(angle) * e1 + math.sin(angle) * e2
+            e[e == 0] = 0.0  # no -0.0 in the log
             amp = float(rng.uniform(*cfg.amplitude))
             period = float(rng.uniform(*cfg.period))
             phase = float(rng.uniform(0, 2 * math.pi))

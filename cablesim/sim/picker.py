@@ -47,6 +47,7 @@ from scipy import ndimage
 from cablesim.camera.base import Camera
 from cablesim.episode import primitives as prim
 from cablesim.episode.config import InteractionConfig
+from cablesim.episode.surface import BOARD
 from cablesim.errors import InputError, NoGraspableSegmentError
 from cablesim.frames import LABEL_ROBOT
 from cablesim.perception.geometry import eccentricity, segment_pose
@@ -109,7 +110,8 @@ def pick_segment(
         )
     verts = world.hose_vertices(hose)
     lengths = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(verts, axis=0), axis=1))])
-    approach = np.asarray(prim.DEFAULT_APPROACH)
+    surface = getattr(world, "surface", BOARD)
+    approach = np.asarray(surface.approach, float)
     screened, passes = _screen(
         uu, vv, depth, K, T, others, verts, lengths, clearance, min_end_distance,
         half_length, max_out_of_plane_deg,
@@ -152,11 +154,11 @@ def pick_segment(
         if d > max_axis_error:
             reasons["off the hose in 3D"] += 1
             continue
-        g_centre = prim.grasp_centre(T, sp.centre, cfg.grasp.surface_offset)
+        g_centre = surface.grasp_centre(prim.grasp_centre(T, sp.centre, cfg.grasp.surface_offset))
         if gripper_obstruction(world, hose, g_centre, axis, approach, cfg, arc):
             reasons["no room for the gripper"] += 1
             continue
-        ok, why = prim.plan_interaction(robot, g_centre, axis, cfg, T, approach)
+        ok, why = prim.plan_interaction(robot, g_centre, axis, cfg, T, surface)
         if not ok:
             if "end point" in why:
                 reasons["action end points unreachable"] += 1

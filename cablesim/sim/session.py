@@ -187,6 +187,10 @@ class SimSession(Session):
     def park(self) -> tuple[float, ...]:
         return tuple(self.world.cfg.robot.park_qpos)
 
+    @property
+    def surface(self) -> Any:
+        return self.world.surface
+
     def draw_hose(self) -> int:
         """The hose of interest: the one chosen at build, the config's, else drawn from the
         ``episode`` stream (once)."""

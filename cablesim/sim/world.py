@@ -28,6 +28,7 @@ import mujoco
 import numpy as np
 
 from cablesim.cables import CableKind
+from cablesim.episode.surface import SURFACES, Surface
 from cablesim.errors import PhysicsDivergedError
 from cablesim.panda.model import attach_panda, set_arm
 from cablesim.panda.visuals import add_mesh_visuals_same_view
@@ -44,6 +45,7 @@ from cablesim.sim.layout import (
     start_shape,
 )
 from cablesim.sim.settle import settle_world
+from cablesim.sim.table import MAT_TOP, PLUG_LENGTH, SOCKET_HALF, socket_direction, socket_point
 
 CAMERA_NAME = "rgbd"
 _WARNINGS = (
@@ -149,33 +151,15 @@ def cable_xml(
 
 
 def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
-    b, h = cfg.board, cfg.hoses
+    h = cfg.hoses
     R = look_at_frame(cam.position, cam.look_at)
-    tex = ""
-    if b.background == "solid":
-        board_mat = f'<material name="board" rgba="{_fmt(b.solid_rgb)} 1" specular="0.1"/>'
+    flexes, equalities = [], []
+    if cfg.surface == "table":
+        board_mat, board_geoms = _table_xml(cfg, hoses)
     else:
-        tex = f'<texture name="board_tex" type="2d" file="{assets.texture_path(b.background)}"/>'
-        board_mat = '<material name="board" texture="board_tex" texrepeat="1 1" specular="0.1"/>'
-    conn = []
-    x_tip = b.x - b.connector_length
-    for i, (y, z) in enumerate(b.connectors):
-        conn.append(
-            f'<geom name="connector{i}" type="mesh" mesh="male" pos="{b.x:.6g} {y:.6g} {z:.6g}" '
-            f'quat="0 0.70710678 0 0.70710678" material="brass" contype="0" conaffinity="0"/>'
-        )
+        board_mat, board_geoms = _board_xml(cfg, hoses)
     light = _lighting(cfg)
-    couplings, flexes, equalities = [], [], []
     for s in hoses:
-        for k, c in enumerate(s.ends):
-            y, z = b.connectors[c]
-            x0 = x_tip + FEMALE_OVERLAP
-            couplings.append(
-                f'<geom name="{s.name}_coupling{k}" type="mesh" mesh="female" '
-                f'pos="{x0:.6g} {y:.6g} {z:.6g}" quat="0 0.70710678 0 0.70710678" '
-                f'rgba="{_fmt(np.clip(np.array(s.rgb) * 0.7 + 0.15, 0, 1))} 1" '
-                f'contype="0" conaffinity="0"/>'
-            )
         top = start_shape(cfg, s)[0]
         spacing = s.length / (s.n_vertices - 1)
         c = s.cable
@@ -236,7 +220,6 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     <material name="floor" rgba="0.25 0.25 0.27 1"/>
     <texture name="room" type="skybox" builtin="gradient" rgb1="0.62 0.63 0.66" rgb2="0.32 0.33 0.36"
              width="64" height="64"/>
-    {tex}
     {board_mat}
   </asset>
   <worldbody>
@@ -244,10 +227,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
            diffuse="{light["key"]}" specular="0.1 0.1 0.1"/>
     <geom name="floor" type="plane" size="3 3 0.1" pos="0 0 -0.75" material="floor" contype="0" conaffinity="0"/>
     <geom name="table" type="box" size="0.75 0.85 0.02" pos="0.15 0 -0.02" material="table" friction="0.8"/>
-    <geom name="board" type="box" size="{b.thickness / 2:.6g} {b.width / 2:.6g} {b.height / 2:.6g}"
-          pos="{b.x + b.thickness / 2:.6g} 0 {b.height / 2:.6g}" material="board" friction="0.6"/>
-    {"".join(conn)}
-    {"".join(couplings)}
+    {board_geoms}
     <camera name="{CAMERA_NAME}" mode="fixed" pos="{_fmt(cam.position)}" xyaxes="{_fmt(cam_xy)}"
             fovy="{cfg.camera.fovy}"/>
     {"".join(flexes)}
@@ -256,6 +236,96 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     {"".join(equalities)}
   </equality>
 </mujoco>"""
+
+
+def _board_xml(cfg: SceneConfig, hoses: list[HoseSpec]) -> tuple[str, str]:
+    """(assets, world geoms) of the task board: the board, its connectors and the coupling on
+    every attached hose end."""
+    b = cfg.board
+    if b.background == "solid":
+        mat = f'<material name="board" rgba="{_fmt(b.solid_rgb)} 1" specular="0.1"/>'
+    else:
+        mat = (
+            f'<texture name="board_tex" type="2d" file="{assets.texture_path(b.background)}"/>'
+            '<material name="board" texture="board_tex" texrepeat="1 1" specular="0.1"/>'
+        )
+    geoms = [
+        f'<geom name="board" type="box" size="{b.thickness / 2:.6g} {b.width / 2:.6g} '
+        f'{b.height / 2:.6g}" pos="{b.x + b.thickness / 2:.6g} 0 {b.height / 2:.6g}" '
+        'material="board" friction="0.6"/>'
+    ]
+    x_tip = b.x - b.connector_length
+    for i, (y, z) in enumerate(b.connectors):
+        geoms.append(
+            f'<geom name="connector{i}" type="mesh" mesh="male" pos="{b.x:.6g} {y:.6g} {z:.6g}" '
+            f'quat="0 0.70710678 0 0.70710678" material="brass" contype="0" conaffinity="0"/>'
+        )
+    for s in hoses:
+        for k, c in enumerate(s.ends):
+            y, z = b.connectors[c]
+            x0 = x_tip + FEMALE_OVERLAP
+            geoms.append(
+                f'<geom name="{s.name}_coupling{k}" type="mesh" mesh="female" '
+                f'pos="{x0:.6g} {y:.6g} {z:.6g}" quat="0 0.70710678 0 0.70710678" '
+                f'rgba="{_fmt(np.clip(np.array(s.rgb) * 0.7 + 0.15, 0, 1))} 1" '
+                f'contype="0" conaffinity="0"/>'
+            )
+    return mat, "\n    ".join(geoms)
+
+
+def _table_xml(cfg: SceneConfig, hoses: list) -> tuple[str, str]:
+    """(assets, world geoms) of the table scene: the mat under the cable region (with the
+    table's ``background``), a socket at every connector and a plug on every plugged end."""
+    t = cfg.table
+    fmt = _fmt
+
+    x0, x1, y0, y1 = t.region
+    m = t.mat_margin
+    if t.background == "solid":
+        mat = f'<material name="mat" rgba="{fmt(t.solid_rgb)} 1" specular="0.05"/>'
+    else:
+        mat = (
+            f'<texture name="mat_tex" type="2d" file="{assets.texture_path(t.background)}"/>'
+            '<material name="mat" texture="mat_tex" texrepeat="1 1" specular="0.05"/>'
+        )
+    mat += '<material name="socket" rgba="0.12 0.12 0.13 1" specular="0.2"/>'
+    geoms = [
+        f'<geom name="mat" type="box" size="{(x1 - x0) / 2 + m:.6g} {(y1 - y0) / 2 + m:.6g} '
+        f'{MAT_TOP / 2}" pos="{(x0 + x1) / 2:.6g} {(y0 + y1) / 2:.6g} {MAT_TOP / 2}" '
+        'material="mat" friction="0.8"/>'
+    ]
+    hz = (t.socket_height + 0.012) / 2  # the socket box reaches 12 mm above a plug's centre
+    for i, (x, y, yaw) in enumerate(t.connectors):
+        d = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+        centre = np.array([x, y, hz]) - d * SOCKET_HALF[0]  # behind its mouth at (x, y)
+        quat = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        geoms.append(
+            f'<geom name="socket{i}" type="box" size="{SOCKET_HALF[0]} {SOCKET_HALF[1]} {hz:.6g}" '
+            f'pos="{fmt(centre)}" quat="{fmt(quat)}" material="socket"/>'
+        )
+    for s in hoses:
+        for k, c in enumerate(s.ends):
+            d = socket_direction(t, c)
+            end = socket_point(cfg, c)
+            mid = end - d * PLUG_LENGTH / 2
+            # a cylinder along the socket's yaw: its z axis turned onto d
+            quat = _quat_z_to(d)
+            rgb = np.clip(np.array(s.rgb) * 0.7 + 0.15, 0, 1)
+            geoms.append(
+                f'<geom name="{s.name}_plug{k}" type="cylinder" '
+                f'size="{max(1.6 * s.radius, 0.004):.6g} {PLUG_LENGTH / 2:.6g}" pos="{fmt(mid)}" '
+                f'quat="{fmt(quat)}" rgba="{fmt(rgb)} 1" contype="0" conaffinity="0"/>'
+            )
+    return mat, "\n    ".join(geoms)
+
+
+def _quat_z_to(d: np.ndarray) -> tuple[float, float, float, float]:
+    """The rotation (w, x, y, z) taking the z axis onto the horizontal unit vector ``d``."""
+    # z -> d: rotate by 90 degrees about the axis z x d
+    axis = np.cross([0.0, 0.0, 1.0], d)
+    axis /= np.linalg.norm(axis)
+    s = math.sin(math.pi / 4)
+    return (math.cos(math.pi / 4), axis[0] * s, axis[1] * s, axis[2] * s)
 
 
 def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose]) -> None:
@@ -391,6 +461,12 @@ class World:
             if hose.end_equality is not None:
                 m.eq_data[hose.end_equality, 3:6] = target[-1]
         mujoco.mj_forward(m, d)
+
+    @property
+    def surface(self) -> Surface:
+        """What holds the cables, as the interaction needs it (approach, action plane, the
+        height under a grasp): ``cfg.surface``'s."""
+        return SURFACES[self.cfg.surface]
 
     # ------------------------------------------------------------------ stepping
     @property

@@ -28,6 +28,7 @@ from cablesim.jobs import Job
 from cablesim.perception.flow import FLOW_BACKENDS
 from cablesim.perception.methods import SEGMENTATION_METHODS
 from cablesim.perception.metrics import BETAS
+from cablesim.sim.config import SURFACES
 
 #: the flow back ends the thesis's tables were made with (any spec of
 #: :data:`~cablesim.perception.flow.FLOW_BACKENDS` may be given: a plug-in's name, or
@@ -69,6 +70,7 @@ class SceneSize(Config):
     periods: int = 3  # K_p
     cable: str = DEFAULT_KIND  # the kind of every cable (cablesim.cables)
     pattern: str | None = None  # the surface pattern of every cable (None: the kind's)
+    surface: str = "board"  # what holds the cables: board or table (SceneConfig.surface)
 
     def _validate(self) -> None:
         for name in ("width", "height", "hoses", "periods"):
@@ -78,6 +80,10 @@ class SceneSize(Config):
         cable_kind(self.cable, "scene.cable")
         if self.pattern is not None:
             check_pattern(self.pattern, "scene.pattern")
+        if self.surface not in SURFACES:
+            raise ConfigError(
+                "scene.surface", f"unknown surface {self.surface!r}; choose one of {SURFACES}"
+            )
 
 
 @dataclass(frozen=True)
@@ -181,6 +187,8 @@ class ThesisConfig(Config):
             del scene["cable"]
         if scene["pattern"] is None:  # ... and before patterns existed
             del scene["pattern"]
+        if scene["surface"] == "board":  # ... and before the table existed
+            del scene["surface"]
         return scene
 
     def interaction_jobs(self) -> list[Job]:

@@ -84,6 +84,7 @@ def test_valid_configs_round_trip_unchanged():
 
 
 def test_jitter_that_could_merge_camera_and_target_is_refused():
-    position = CameraConfig().position
+    position = SceneConfig().view()[0]  # the board's camera (camera.position None)
+    look_at = (position[0] + 0.05, 0.0, position[2])
     with pytest.raises(ConfigError, match="camera.look_at"):
-        CameraConfig(look_at=(position[0] + 0.05, 0.0, position[2]), position_jitter=0.02)
+        SceneConfig(camera=CameraConfig(look_at=look_at, position_jitter=0.02))

@@ -530,7 +530,7 @@ def grade_proposals(scene: Scene, votes: dict[str, np.ndarray], tg: Target) -> d
     session = SimSession.build(scene.config())
     out: dict[str, Any] = {}
     try:
-        reach = grasp_reachability(session.robot, T, session.interaction_config())
+        reach = grasp_reachability(session.robot, T, session.interaction_config(), session.surface)
         for name, v in votes.items():
             sampler = GraspSampler(reachability=reach)
             if c_cam is not None:

@@ -1,0 +1,224 @@
+"""The table-top scene (``SceneConfig.surface = "table"``): cables lying and crossing on a mat,
+plugged into sockets on the table at one or both ends, grasped from above."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from cablesim.cli import main
+from cablesim.config import from_dict, to_dict
+from cablesim.dataset.randomize import Randomization, randomize_scene
+from cablesim.episode import primitives as prim
+from cablesim.episode.surface import BOARD, FINGERTIP_REACH, TABLE
+from cablesim.errors import ConfigError
+from cablesim.sim.config import SURFACE_VIEWS, EpisodeConfig, HoseConfig, SceneConfig
+from cablesim.sim.layout import sample_hoses, start_shape
+from cablesim.sim.table import MAT_TOP, socket_point
+
+
+def table(seed: int = 1, **values) -> SceneConfig:
+    return SceneConfig(seed=seed, surface="table").with_values(values)
+
+
+def _arc(p: np.ndarray) -> float:
+    return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+
+def _min_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Smallest distance between two polylines, both densified to 5 mm."""
+    from scipy.spatial import cKDTree
+
+    def dense(p: np.ndarray) -> np.ndarray:
+        out = [p[:1]]
+        for u, v in zip(p[:-1], p[1:], strict=True):
+            n = max(1, int(np.ceil(np.linalg.norm(v - u) / 0.005)))
+            out.append(u + (np.arange(1, n + 1)[:, None] / n) * (v - u))
+        return np.concatenate(out)
+
+    return float(cKDTree(dense(b)).query(dense(a))[0].min())
+
+
+# ---------------------------------------------------------------------- layout (no physics)
+@pytest.mark.parametrize("kind", ["garden_hose", "thin_wire", "rope"])
+def test_start_shapes_lie_apart_on_the_table_with_their_lengths_and_sockets(kind: str) -> None:
+    plugged_far, free_far = 0, 0
+    for seed in range(6):
+        cfg = table(seed, **{"hoses.kind": kind, "hoses.count": 5})
+        specs = sample_hoses(cfg)
+        shapes = [start_shape(cfg, s) for s in specs]
+        for s, p in zip(specs, shapes, strict=True):
+            assert p.shape == (s.n_vertices, 3)
+            assert _arc(p) == pytest.approx(s.length, rel=0.01)
+            chords = np.linalg.norm(np.diff(p, axis=0), axis=1)
+            assert chords.max() / chords.min() < 1.05  # the rod's rest spacing, evenly
+            assert np.allclose(p[0], socket_point(cfg, s.ends[0]))
+            if s.both_ends:
+                assert np.allclose(p[-1], socket_point(cfg, s.ends[1]), atol=1e-9)
+                plugged_far += 1
+            else:
+                free_far += 1
+            assert (p[:, 2] >= s.radius).all() and (p[:, 2] < 0.2).all()  # above the table
+            x, y = p[:, 0], p[:, 1]
+            assert (np.abs(y) < 0.85).all() and ((x > -0.6) & (x < 0.9)).all()  # on it
+        # no two start shapes cut into each other: each lies at its own height where they
+        # cross, or is lifted over the other (evening the chords out again after a lift may
+        # bring them within a fraction of a millimetre of touching)
+        for i in range(len(specs)):
+            for j in range(i + 1, len(specs)):
+                gap = _min_distance(shapes[i], shapes[j])
+                assert gap > 0.9 * (specs[i].radius + specs[j].radius), (seed, i, j, gap)
+        assert len({s.ends[0] for s in specs}) == len(specs)  # one cable per socket
+    assert plugged_far > 0 and free_far > 0  # some far ends plugged, some free
+
+
+def test_the_table_layout_is_the_seeds_alone() -> None:
+    a = [start_shape(table(5), s) for s in sample_hoses(table(5))]
+    b = [start_shape(table(5), s) for s in sample_hoses(table(5))]
+    c = [start_shape(table(6), s) for s in sample_hoses(table(6))]
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    assert not all(x.shape == y.shape and np.allclose(x, y) for x, y in zip(a, c, strict=False))
+
+
+# ---------------------------------------------------------------------- config
+def test_the_surface_is_a_checked_field_with_its_own_camera_view() -> None:
+    assert SceneConfig().surface == "board" and SceneConfig().view() == SURFACE_VIEWS["board"]
+    assert table().view() == SURFACE_VIEWS["table"]
+    assert table(**{"camera.position": (0.3, -0.4, 0.7)}).view()[0] == (0.3, -0.4, 0.7)
+    with pytest.raises(ConfigError, match="surface.*'desk'"):
+        SceneConfig(surface="desk")
+    with pytest.raises(ConfigError, match="hoses.count.*the table has 2"):
+        table(**{"table.connectors": ((0.1, 0.0, 0.0), (0.6, 0.0, math.pi))})
+    with pytest.raises(ConfigError, match="table.region"):
+        table(**{"table.region": (0.2, 0.25, -0.2, 0.2)})
+    with pytest.raises(ConfigError, match=r"table.connectors\[0\].*off the table"):
+        table(**{"table.connectors": ((2.0, 0.0, 0.0),) * 4})
+    with pytest.raises(ConfigError, match="table.socket_height"):
+        table(**{"table.socket_height": 0.006})  # under a 15 mm hose's centre
+    with pytest.raises(ConfigError, match="interaction.kind.*table"):
+        EpisodeConfig(scene=table()).with_values({"interaction.kind": "push"})
+
+
+def test_a_mixed_table_scene_round_trips_through_config_json() -> None:
+    cfg = EpisodeConfig(
+        scene=SceneConfig(
+            seed=4, surface="table", hoses=HoseConfig(count=3, kinds=("rope", "thin_wire"))
+        )
+    )
+    again = from_dict(EpisodeConfig, json.loads(json.dumps(to_dict(cfg))))
+    assert again == cfg and again.scene.surface == "table"
+    assert [s.kind for s in sample_hoses(again.scene)] == ["rope", "thin_wire", "rope"]
+
+
+def test_the_scene_flag_writes_the_surface(capsys) -> None:
+    assert main(["episode", "--scene", "table", "--seed", "3", "--show-config"]) == 0
+    out = capsys.readouterr().out
+    assert 'scene.surface = "table"' in out and "scene.camera.position = null" in out
+    assert main(["benchmark", "thesis", "--scene", "table", "--show-config"]) == 0
+    assert 'scene.surface = "table"' in capsys.readouterr().out
+
+
+def test_the_dataset_randomiser_draws_the_mats_background_on_the_table() -> None:
+    board = randomize_scene(7, SceneConfig(), Randomization())
+    mat = randomize_scene(7, table(), Randomization())
+    assert mat.table.background == board.board.background  # the same draw, on the mat
+    assert mat.table.solid_rgb == board.board.solid_rgb
+    assert mat.board == SceneConfig().board and board.table == SceneConfig().table
+
+
+# ---------------------------------------------------------------------- directions, grasp height
+def test_actions_on_the_table_stay_in_its_plane() -> None:
+    """The table's camera looks down at 62 degrees: the image plane's direction of a cable
+    along x would tilt 28 degrees into the table; the table's own plane does not."""
+    cfg = table()
+    from cablesim.sim.regions import camera_pose
+
+    T = camera_pose(cfg)
+    axis = np.array([1.0, 0.3, 0.0]) / np.hypot(1.0, 0.3)
+    for name in ("along", "across", "horizontal"):
+        d = prim.action_direction(name, axis, T, TABLE)
+        assert abs(d[2]) < 1e-12 and np.linalg.norm(d) == pytest.approx(1.0)
+    along = prim.action_direction("along", axis, T, TABLE)
+    assert along @ axis == pytest.approx(1.0)
+    assert prim.action_direction("normal", axis, T, TABLE) == pytest.approx([0, 0, 1])
+    on_board = prim.action_direction("along", np.array([0.0, 0.6, -0.8]), T, BOARD)
+    assert abs(on_board[2]) > 0.3  # the board keeps the image plane (the thesis's)
+
+
+def test_a_grasp_on_the_table_keeps_the_fingertips_above_it() -> None:
+    low = np.array([0.3, -0.1, 0.001])  # a 2 mm wire's centre
+    assert TABLE.grasp_centre(low)[2] == pytest.approx(MAT_TOP + FINGERTIP_REACH + 0.0005)
+    high = np.array([0.3, -0.1, 0.05])  # on top of a pile: as seen
+    assert np.array_equal(TABLE.grasp_centre(high), high)
+    assert np.array_equal(BOARD.grasp_centre(low), low)
+
+
+# ---------------------------------------------------------------------- physics
+@pytest.fixture(scope="module")
+def table_world():
+    from cablesim.sim.world import World
+
+    cfg = table(2, **{"hoses.count": 3, "camera.width": 160, "camera.height": 120})
+    return World.build(cfg.with_values({"physics.cache": False}))
+
+
+def test_the_table_scene_settles_with_its_cables_lying_on_the_mat(table_world) -> None:
+    from cablesim.sim.camera import SimCamera
+
+    w = table_world
+    assert w.surface is TABLE and w.hose_stretch().max() < 0.01
+    for h in w.hoses:
+        v = w.hose_vertices(h.spec.index)
+        r = h.spec.radius
+        assert v[:, 2].min() == pytest.approx(MAT_TOP + r, abs=0.002)  # resting on the mat
+        assert v[:, 2].max() < 0.06  # lying: on the mat, on the other cables, over a plug
+        assert np.allclose(v[0], socket_point(w.cfg, h.spec.ends[0]), atol=0.003)  # plugged
+    with SimCamera(w) as cam:
+        labels = cam.render_labels()
+    assert not (labels == -2).any()  # the parked arm is out of the table camera's view
+    assert set(np.unique(labels)) >= {0, 1, 2}  # every cable in view
+
+
+def test_the_perturbation_pulls_in_the_tables_plane(table_world) -> None:
+    from cablesim.seeding import stream
+    from cablesim.sim.config import PerturbConfig
+    from cablesim.sim.perturb import NeighbourPerturbation
+
+    p = NeighbourPerturbation(PerturbConfig(enabled=True), stream(1, "perturb"))
+    p.hose_of_interest = 0
+    p.start(table_world)
+    try:
+        assert p.log and all(e["direction_world"][2] == 0.0 for e in p.log)
+    finally:
+        p.stop(table_world)
+
+
+def test_a_cable_on_the_table_is_grasped_from_above_and_follows_the_hand() -> None:
+    """A whole simulated interaction on the table: the hand comes down (its approach axis is
+    world -z), the fingertips stay above the mat, the grasp holds and the cable follows both
+    actions, which move in the table's plane."""
+    from cablesim.sim.session import SimSession
+
+    scene = table(1, **{"hoses.count": 3, "camera.width": 320, "camera.height": 240})
+    cfg = EpisodeConfig(scene=scene).with_values({"interaction.actions.periods": 1})
+    session = SimSession.build(cfg)
+    try:
+        assert session.surface is TABLE
+        result = session.interact(session.pick_start().mask)
+        assert result.success, (result.outcome, result.reason)
+        g = result.grasp
+        assert g is not None and g.rotation[:, 2] @ [0, 0, -1] > math.cos(math.radians(15))
+        assert g.position[2] >= MAT_TOP + FINGERTIP_REACH
+        assert result.details["grasp"]["hold_error"] < 0.005
+        assert all(a.gain > 0.5 for a in result.actions), [a.gain for a in result.actions]
+        stream, T = result.stream, session.T_world_camera
+        assert stream is not None
+        for a in range(len(result.actions)):
+            path = np.array([T[:3, :3] @ f.gripper + T[:3, 3] for f in stream.action_frames(a)])
+            assert np.ptp(path[:, 2]) < 0.005  # the hand slid over the table, not into it
+            assert np.hypot(*np.ptp(path[:, :2], axis=0)) > 0.03  # 2 x 2 cm, in the plane
+    finally:
+        session.close()
