@@ -238,17 +238,24 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
 </mujoco>"""
 
 
+def _background_material(
+    name: str, background: str, solid_rgb: Sequence[float], specular: float
+) -> str:
+    """The MJCF material ``name`` of a board or mat: ``solid_rgb`` for "solid", else the
+    background's texture (and its texture element)."""
+    if background == "solid":
+        return f'<material name="{name}" rgba="{_fmt(solid_rgb)} 1" specular="{specular}"/>'
+    return (
+        f'<texture name="{name}_tex" type="2d" file="{assets.texture_path(background)}"/>'
+        f'<material name="{name}" texture="{name}_tex" texrepeat="1 1" specular="{specular}"/>'
+    )
+
+
 def _board_xml(cfg: SceneConfig, hoses: list[HoseSpec]) -> tuple[str, str]:
     """(assets, world geoms) of the task board: the board, its connectors and the coupling on
     every attached hose end."""
     b = cfg.board
-    if b.background == "solid":
-        mat = f'<material name="board" rgba="{_fmt(b.solid_rgb)} 1" specular="0.1"/>'
-    else:
-        mat = (
-            f'<texture name="board_tex" type="2d" file="{assets.texture_path(b.background)}"/>'
-            '<material name="board" texture="board_tex" texrepeat="1 1" specular="0.1"/>'
-        )
+    mat = _background_material("board", b.background, b.solid_rgb, 0.1)
     geoms = [
         f'<geom name="board" type="box" size="{b.thickness / 2:.6g} {b.width / 2:.6g} '
         f'{b.height / 2:.6g}" pos="{b.x + b.thickness / 2:.6g} 0 {b.height / 2:.6g}" '
@@ -281,13 +288,7 @@ def _table_xml(cfg: SceneConfig, hoses: list) -> tuple[str, str]:
 
     x0, x1, y0, y1 = t.region
     m = t.mat_margin
-    if t.background == "solid":
-        mat = f'<material name="mat" rgba="{fmt(t.solid_rgb)} 1" specular="0.05"/>'
-    else:
-        mat = (
-            f'<texture name="mat_tex" type="2d" file="{assets.texture_path(t.background)}"/>'
-            '<material name="mat" texture="mat_tex" texrepeat="1 1" specular="0.05"/>'
-        )
+    mat = _background_material("mat", t.background, t.solid_rgb, 0.05)
     mat += '<material name="socket" rgba="0.12 0.12 0.13 1" specular="0.2"/>'
     geoms = [
         f'<geom name="mat" type="box" size="{(x1 - x0) / 2 + m:.6g} {(y1 - y0) / 2 + m:.6g} '
