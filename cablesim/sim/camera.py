@@ -12,12 +12,13 @@ from the robot root body (``panda/link0``), everything else is background.  RGB 
 come from one render pass, labels from a second one.
 
 The camera is fixed, so what is welded to the world (board, table, connectors, the sky) looks
-the same in every frame: it is rendered once per camera (the background layer), and each
-colour pass draws only what can move (hoses, robot) and takes, per pixel, the nearer of the two
-layers by their depth buffers.  Where no geometry affects how other geometry looks (opaque
-materials, lights fixed to the world, no shadows, reflections or multisampling) this gives the
-very pixels of a full render, bit for bit, for about a third less work per colour pass;
-otherwise every pass is a full render.
+the same in every frame: it is rendered once per camera (the background layers, colour and
+segmentation), and each pass draws only what can move (hoses, robot) and takes, per pixel, the
+nearer of the two layers by their depth buffers.  Where no geometry affects how other geometry
+looks (opaque materials, lights fixed to the world, no shadows, reflections or multisampling)
+this gives the very pixels, labels and depths of a full render, bit for bit, for about a third
+less work per pass; otherwise every pass is a full render.  A snapshot's label pass draws the
+scene its colour pass built.
 
 The optional depth noise (``cfg.camera.depth_noise``) is RealSense-like: with
 ``depth_model = "gaussian"`` Gaussian with sigma = k z^2, 1 mm quantisation, and dropped
@@ -35,6 +36,7 @@ import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+import cv2
 import mujoco
 import numpy as np
 
@@ -179,6 +181,7 @@ class SimCamera(Camera):
         self._antialias = int(antialias_samples)
         self._layers = self._layer_options() if layered else None
         self._background: tuple[bytes, np.ndarray, np.ndarray] | None = None
+        self._background_seg: tuple[bytes, np.ndarray, np.ndarray, np.ndarray] | None = None
         self._near = float(m.vis.map.znear * m.stat.extent)
         self._far = float(m.vis.map.zfar * m.stat.extent)
         # label lookup tables: geom id -> label / body; flex id -> hose index
@@ -220,21 +223,19 @@ class SimCamera(Camera):
     # ------------------------------------------------------------------ sim only
     def render_labels(self) -> np.ndarray:
         """HxW int16 labels of the current state (hose index, LABEL_ROBOT, LABEL_BACKGROUND)."""
-        self._update_scene()
         return self._render_segmentation()[0]
 
     def snapshot(self, **meta: Any) -> SimSnapshot:
         """Render RGB, depth and labels of the current state and record the rod and body
         state, so ground-truth flow to or from any other snapshot can be computed later."""
         rgb, _ = self._render_rgbd(depth=False)  # the label pass's depth is the one kept
-        self._update_scene()
-        labels, body, depth = self._render_segmentation()
+        # layered, the colour pass built the moving layer's scene: the label pass draws it too
+        labels, body, depth = self._render_segmentation(update=self._layers is None)
         return self._snapshot(self._image(rgb, depth), labels, body, depth, meta)
 
     def snapshot_of(self, image: CameraImage, **meta: Any) -> SimSnapshot:
         """The snapshot of the current state for an ``image`` already captured in it (only the
         labels are rendered)."""
-        self._update_scene()
         labels, body, depth = self._render_segmentation()
         return self._snapshot(image, labels, body, depth, meta)
 
@@ -354,12 +355,11 @@ class SimCamera(Camera):
                 rgb, raw = self._render_raw()
             finally:
                 scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = sky
-            # reversed z: the larger value is nearer; an empty pixel (0) shows the background
-            front = raw > bg_raw
-            np.copyto(rgb, bg_rgb, where=~front[..., None])
+            back = _behind(raw, bg_raw)
+            cv2.copyTo(bg_rgb, back, rgb)
             if depth:
-                np.copyto(raw, bg_raw, where=~front)
-        return np.ascontiguousarray(rgb[::-1]), self._metric_depth(raw) if depth else None
+                cv2.copyTo(bg_raw, back, raw)
+        return cv2.flip(rgb, 0), self._metric_depth(raw) if depth else None
 
     def _render_raw(self) -> tuple[np.ndarray, np.ndarray]:
         """Render the current scene; colour and raw depth buffer of that same pass, bottom
@@ -420,10 +420,30 @@ class SimCamera(Camera):
         """Colour and raw depth of the world-welded geoms and the sky, rendered once per
         camera pose (and again if a fixed geom or the camera was moved)."""
         assert self._layers is not None
+        key = self._background_key()
+        if self._background is None or self._background[0] != key:
+            self._update_scene(self._layers[0])
+            rgb, raw = self._render_raw()
+            self._background = (key, rgb, raw)
+        return self._background[1], self._background[2]
+
+    def _background_segmentation(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Labels, body ids and raw depth (bottom row first) of the background layer's
+        segmentation pass, rendered once per camera pose like its colour."""
+        assert self._layers is not None
+        key = self._background_key()
+        if self._background_seg is None or self._background_seg[0] != key:
+            self._update_scene(self._layers[0])
+            self._background_seg = (key, *self._segmentation_pass())
+        return self._background_seg[1:]
+
+    def _background_key(self) -> bytes:
+        """What the background layers depend on: the camera pose and the fixed geoms' poses
+        and colours."""
         d, m = self.world.data, self.world.model
         static = m.body_weldid[m.geom_bodyid] == 0
         cam = self.world.camera_id
-        key = b"".join(
+        return b"".join(
             np.ascontiguousarray(a).tobytes()
             for a in (
                 d.cam_xpos[cam],
@@ -433,15 +453,28 @@ class SimCamera(Camera):
                 m.geom_rgba[static],
             )
         )
-        if self._background is None or self._background[0] != key:
-            self._update_scene(self._layers[0])
-            rgb, raw = self._render_raw()
-            self._background = (key, rgb, raw)
-        return self._background[1], self._background[2]
 
-    def _render_segmentation(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(labels int16, body id int32, depth float32) per pixel from one segmentation pass
-        of the current scene; its depth matches the labels pixel for pixel."""
+    def _render_segmentation(
+        self, update: bool = True
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(labels int16, body id int32, depth float32) per pixel of the current state, top
+        row first, from one segmentation pass (layered: of the moving layer over the cached
+        background layer's); its depth matches the labels pixel for pixel.  ``update=False``
+        draws the scene as the last pass left it (the same state and layer)."""
+        if update:
+            self._update_scene(None if self._layers is None else self._layers[1])
+        labels, body, raw = self._segmentation_pass()
+        if self._layers is not None:
+            bg_labels, bg_body, bg_raw = self._background_segmentation()
+            back = _behind(raw, bg_raw)
+            cv2.copyTo(bg_labels, back, labels)
+            cv2.copyTo(bg_body, back, body)
+            cv2.copyTo(bg_raw, back, raw)
+        return cv2.flip(labels, 0), cv2.flip(body, 0), self._metric_depth(raw)
+
+    def _segmentation_pass(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(labels, body ids, raw depth), bottom row first, of one segmentation pass of the
+        scene as it is."""
         r = self._ctx()
         scene = r.scene
         flags = scene.flags.copy()
@@ -451,8 +484,6 @@ class SimCamera(Camera):
             rgb, raw = self._render_raw()
         finally:
             np.copyto(scene.flags, flags)
-        depth = self._metric_depth(raw)
-        rgb = rgb[::-1]
         segid = (
             rgb[..., 0].astype(np.int32)
             | (rgb[..., 1].astype(np.int32) << 8)
@@ -474,7 +505,7 @@ class SimCamera(Camera):
         lut_body[geom] = m.geom_bodyid[objid[geom]]
         flex = objtype == int(mujoco.mjtObj.mjOBJ_FLEX)
         lut_label[flex] = self._flex_label[objid[flex]]
-        return lut_label[segid], lut_body[segid], depth
+        return lut_label[segid], lut_body[segid], raw
 
     def _image(self, rgb: np.ndarray, depth: np.ndarray) -> CameraImage:
         if self.rgb_noise:
@@ -501,3 +532,10 @@ class SimCamera(Camera):
         drop = jump & (rng.random(z.shape) < DEPTH_EDGE_DROPOUT)
         out = np.where(valid & ~drop & (noisy > 0), noisy, 0.0)
         return out.astype(np.float32)
+
+
+def _behind(raw: np.ndarray, bg_raw: np.ndarray) -> np.ndarray:
+    """The pixels (a uint8 mask for ``cv2.copyTo``) where the background layer shows: the
+    moving layer is not nearer there.  Reversed z: the larger value is nearer; an empty pixel
+    (0) shows the background."""
+    return (raw <= bg_raw).view(np.uint8)
