@@ -480,23 +480,24 @@ class World:
         d = self.data
         try:
             if not (self.before_step or self.after_step):
+                strain = None
                 for _ in range(n):
                     # a blow-up resets the data and counts a warning: caught below
-                    self._advance()
-                self.check_diverged()
+                    strain = self._advance()
+                self.check_diverged(strain)
                 return
             for _ in range(n):
                 for hook in tuple(self.before_step):
                     hook(self)
-                self._advance()
-                self.check_diverged()
+                self.check_diverged(self._advance())
                 for hook in tuple(self.after_step):
                     hook(self)
         except mujoco.FatalError as e:  # e.g. out of memory for contacts
             raise PhysicsDivergedError(f"MuJoCo stopped at t={d.time:.3f}s: {e}") from e
 
-    def _advance(self) -> None:
-        """One physics step.  With ``physics.solver`` Newton: if Newton stops converging (it
+    def _advance(self) -> np.ndarray | None:
+        """One physics step; the hoses' edge strain after it where the step measured it (else
+        None).  With ``physics.solver`` Newton: if Newton stops converging (it
         hits its iteration limit, which MuJoCo 4.0's Newton does in some hose-on-hose contact
         states and then leaves the hoses jittering), the step is redone from the same state
         with CG, and CG keeps stepping for ``physics.fallback_time`` before Newton resumes.
@@ -512,8 +513,11 @@ class World:
             rescue = self.cfg.physics.rescue_strain > 0 and len(self._edge_length0) > 0
             mujoco.mj_getState(m, d, self._step_state, _STATE)
             self._plain_step()
-            if not (rescue and self.hose_stretch().max() > self.cfg.physics.rescue_strain):
-                return
+            if not rescue:
+                return None
+            strain = self.hose_stretch()
+            if not strain.max() > self.cfg.physics.rescue_strain:
+                return strain
             # redo the step from the saved state, and go on, with the dense Newton
             mujoco.mj_setState(m, d, self._step_state, _STATE)
             self._fallback_steps = 0
@@ -525,6 +529,7 @@ class World:
         self._rescue_steps -= 1
         if self._rescue_steps == 0:
             m.opt.solver, m.opt.jacobian = self._solver, self._jacobian
+        return None
 
     def _plain_step(self) -> None:
         """One step with the configured solver and the CG fallback (state saved by the caller
@@ -591,7 +596,9 @@ class World:
             for hook in after:
                 self.after_step.remove(hook)
 
-    def check_diverged(self) -> None:
+    def check_diverged(self, strain: np.ndarray | None = None) -> None:
+        """Raise ``PhysicsDivergedError`` where the last step blew up.  ``strain``: the hose
+        edge strain of the current state where the caller has it (``hose_stretch``)."""
         d = self.data
         counts = d.warning.number[_WARNING_INDEX]
         bad = counts > self._warn_counts
@@ -604,7 +611,7 @@ class World:
                 f"(now {self.model.opt.timestep}) or stiffer hose contacts"
             )
         if len(self._edge_length0):
-            strain = self.hose_stretch()
+            strain = self.hose_stretch() if strain is None else strain
             k = int(np.argmax(strain))
             if strain[k] > self.cfg.physics.max_hose_strain:
                 m = self.model
