@@ -162,3 +162,67 @@ def test_action_directions_and_waypoints():
     assert len(way) == 12
     d = np.array([w.position - g1.position for w in way]) @ along
     assert np.allclose(d, [0.02, 0, -0.02, 0] * 3)
+
+
+class FlakyGripperRobot:
+    """A robot whose gripper reads fail ``fail`` times in a row once ``after`` reads went
+    well (``fail`` None: for good)."""
+
+    joint_positions = np.zeros(7)
+
+    def __init__(self, after: int, fail: int | None) -> None:
+        self.after, self.fail, self.reads = after, fail, 0
+
+    def ee_pose(self) -> Pose:
+        return Pose(np.zeros(3))
+
+    @property
+    def gripper_opening(self) -> float:
+        self.reads += 1
+        bad = self.reads > self.after and (
+            self.fail is None or self.reads <= self.after + self.fail
+        )
+        if bad:
+            raise RuntimeError("Net Exception")
+        return 0.04
+
+
+class PacedCamera:
+    """A camera whose capture blocks 5 ms, as a stream's next frame does."""
+
+    def capture(self):
+        import time
+
+        from cablesim.camera.base import CameraImage
+        from cablesim.frames import Intrinsics
+
+        time.sleep(0.005)
+        return CameraImage(
+            np.zeros((4, 4, 3), np.uint8),
+            np.ones((4, 4), np.float32),
+            time.monotonic(),
+            Intrinsics(4.0, 4.0, 2.0, 2.0, 4, 4),
+        )
+
+
+def test_stream_clock_rides_out_failed_gripper_reads_and_stops_on_a_lasting_failure():
+    """A few failed reads of the gripper's opening (a starved gripper server) keep the last
+    opening and are counted; reads failing for longer than ``opening_patience`` end the block
+    with the robot's own error."""
+    import time
+
+    from cablesim.episode.clock import StreamClock
+
+    robot = FlakyGripperRobot(after=3, fail=5)
+    clock = StreamClock(robot, PacedCamera(), pose_rate=200.0)
+    ticks: list[Tick] = []
+    with clock.streaming(ticks.append):
+        time.sleep(0.3)
+    assert robot.reads > 10 and clock.stats.opening_read_failures == 5
+    assert ticks and all(t.opening == 0.04 for t in ticks)
+    assert clock.stats.summary()["opening_read_failures"] == 5
+
+    clock = StreamClock(FlakyGripperRobot(after=3, fail=None), PacedCamera(), opening_patience=0.1)
+    with pytest.raises(RuntimeError, match="Net Exception"):  # noqa: PT012
+        with clock.streaming(ticks.append):
+            time.sleep(2.0)
