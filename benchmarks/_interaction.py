@@ -110,19 +110,21 @@ def stream_digest(stream: Any, votes: np.ndarray | None) -> str:
 def run_interaction(session: Any, segment_mask: np.ndarray, perception: bool = True) -> Any:
     """One interaction of ``session`` at ``segment_mask``, then perception; timed by stage."""
     import cablesim.sim.flow_gt as flow_gt
+    import cablesim.sim.truth as sim_truth
     from cablesim.perception import segment_stream
 
     render, truth = Stopwatch(), Stopwatch()
     camera = session.camera
     original_snapshot, original_flow = camera.snapshot, flow_gt.flow_to_target
     camera.snapshot = render.wrap(original_snapshot)
-    flow_gt.flow_to_target = truth.wrap(original_flow)
+    # the truth provider calls the name it imported: wrap it there too
+    flow_gt.flow_to_target = sim_truth.flow_to_target = truth.wrap(original_flow)
     t0, c0 = time.perf_counter(), time.process_time()
     try:
         res = session.interact(segment_mask)
     finally:
         camera.snapshot = original_snapshot
-        flow_gt.flow_to_target = original_flow
+        flow_gt.flow_to_target = sim_truth.flow_to_target = original_flow
     t1, c1 = time.perf_counter(), time.process_time()
     run = InteractionRun(session.cfg.seed, session.hose, bool(res.success), res.reason)
     run.wall = {
