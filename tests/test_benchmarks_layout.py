@@ -30,7 +30,9 @@ def test_every_folder_is_a_package() -> None:
         assert (p.parent / "__init__.py").is_file(), p
 
 
-@pytest.mark.parametrize("module", ["benchmarks.seeds", "benchmarks.experiments.realistic_flow"])
+@pytest.mark.parametrize(
+    "module", ["benchmarks.seeds", "benchmarks.experiments.realistic_flow", "benchmarks.real_clips"]
+)
 def test_a_script_runs_as_a_module(module: str) -> None:
     out = subprocess.run(
         [sys.executable, "-m", module, "--help"],
