@@ -28,6 +28,7 @@ SUBCOMMANDS: dict[str, str] = {
     "twin": "the real-robot path with no hardware: franka-sim + a digital twin + RealSense",
     "benchmark": "the thesis's tables in simulation: tuned on validation scenes, scored on test",
     "dataset": "write simulated sequences in the published layouts (MovingCables, mcor)",
+    "train": "train the learned flow back end on simulated clips with exact flow (torch)",
     "cables": "list the cable kinds (garden hose, electrical cable, thin wire, rope) and their parameters",
 }
 

@@ -343,6 +343,11 @@ FLOW_BACKENDS.register(
     "RAFT-style network from a checkpoint (torch; raft,checkpoint=FILE)",
 )
 FLOW_BACKENDS.register(
+    "learned",
+    "cablesim.perception.learned:LearnedFlow",
+    "DIS refined by a network trained on cablesim's exact flow (torch; weights=FILE)",
+)
+FLOW_BACKENDS.register(
     "oracle", OracleFlow, "the simulator's ground-truth flow (simulated streams only)"
 )
 

@@ -1,0 +1,181 @@
+"""The learned flow beside DIS and Farneback on held-out simulated clips, and its speed.
+
+    .venv/bin/python -m benchmarks.learned_flow --data SPLIT [SPLIT ...] [--flow SPEC ...]
+        [--weights FILE] [--write]
+
+``SPLIT`` is a MovingCables split folder of simulated test clips, made with seeds that neither
+training nor validation used, e.g.::
+
+    cablesim dataset movingcables --scenes 102000:102006 --split test --out data/lf-board
+    cablesim dataset movingcables --scenes 102500:102506 --split test --scene table \\
+        --out data/lf-table
+
+Each back end is scored with the published MovingCables protocol
+(:func:`cablesim.formats.movingcables.evaluate_clip`: flow from each image to the first, the
+arm -- the clip's "stick" -- never moving, moving where |flow| > 1 px, truth the exact normal
+flow as published and the exact flow), pooled per split folder: IoU, precision, recall, EPE
+over all pixels and over the pixels whose true flow exceeds 1 px.  The speed section times
+one flow at 552x408 (the thesis's crop, scaled 1.5x) on one thread: thread CPU time, median of
+``--repeats`` after a warm-up.
+
+Writes ``benchmarks/results/learned_flow.md`` with ``--write``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from benchmarks import RESULTS, write_results
+from cablesim import provenance as pv
+from cablesim.formats.movingcables import evaluate_clip, list_clips
+from cablesim.perception.flow import FlowEstimator, make_flow
+from cablesim.perception.metrics import movingcables_summary
+
+DEFAULT_FLOWS = ("dis", "dis-medium", "farneback", "learned")
+
+
+def score(splits: list[Path], flow: str | FlowEstimator, truth: str) -> dict[str, dict[str, float]]:
+    """Per split folder (and ``all``): the pooled MovingCables summary of ``flow``."""
+    est = make_flow(flow) if isinstance(flow, str) else flow
+    out: dict[str, dict[str, float]] = {}
+    every = []
+    for split in splits:
+        frames = []
+        for clip in list_clips(split):
+            stats, _ = evaluate_clip(split, clip, est, 1.0, truth=truth)
+            frames.extend(stats[1:])  # the first image is its own reference
+        every.extend(frames)
+        out[_name(split)] = movingcables_summary(frames).to_dict()
+    out["all"] = movingcables_summary(every).to_dict()
+    return out
+
+
+def _name(split: Path) -> str:
+    return f"{split.parent.name}/{split.name}"
+
+
+def speed(flow: str | FlowEstimator, repeats: int = 7) -> float:
+    """Median thread CPU seconds of one flow at 552x408 on one thread."""
+    est = make_flow(flow) if isinstance(flow, str) else flow
+    rng = np.random.default_rng(0)
+    img = cv2.GaussianBlur(rng.uniform(0, 255, (408, 552, 3)).astype(np.float32), (0, 0), 2)
+    a = np.clip((img - 127) * 3 + 127, 0, 255).astype(np.uint8)
+    b = np.roll(a, (2, 3), axis=(0, 1))
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    torch_threads = _torch_threads(1)
+    try:
+        est.compute(a, b)
+        times = []
+        for _ in range(repeats):
+            t0 = time.thread_time()
+            est.compute(a, b)
+            times.append(time.thread_time() - t0)
+    finally:
+        cv2.setNumThreads(threads)
+        _torch_threads(torch_threads)
+    return statistics.median(times)
+
+
+def _torch_threads(n: int) -> int | None:
+    try:
+        import torch  # lazy: optional heavy package
+    except ImportError:
+        return None
+    old = torch.get_num_threads()
+    if n is not None:
+        torch.set_num_threads(n)
+    return old
+
+
+def report(
+    results: dict[str, dict[str, dict[str, dict[str, float]]]],
+    speeds: dict[str, float],
+    splits: list[Path],
+    weights: str,
+) -> str:
+    lines = [
+        "# The learned flow on held-out simulated clips (`python -m benchmarks.learned_flow`)",
+        "",
+        f"- date: {pv.utc_date()}; commit {pv.git_commit()}; machine: {pv.machine()}",
+        f"- weights: `{weights}`",
+        "- clips: " + ", ".join(f"`{_name(s)}` ({len(list_clips(s))} clips)" for s in splits),
+        "- MovingCables protocol: flow from each image to the first, the arm never moving, "
+        "moving where |flow| > 1 px; IoU, P, R pooled as published (mean over images); "
+        "EPE > 1 px: over the pixels whose true flow exceeds 1 px",
+        "",
+    ]
+    for truth, by_flow in results.items():
+        lines += [
+            f"## Truth: exact {truth.replace('_', ' ')}",
+            "",
+            "| clips | back end | IoU | P | R | EPE all | EPE > 1 px | images |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        names = list(next(iter(by_flow.values())))
+        for where in names:
+            for flow, res in by_flow.items():
+                s = res[where]
+                lines.append(
+                    f"| {where} | {flow} | {s['iou']:.3f} | {s['precision']:.3f} | "
+                    f"{s['recall']:.3f} | {s['epe']:.3f} | {s['epe_gt_gt1']:.2f} | "
+                    f"{s['images']} |"
+                )
+        lines.append("")
+    if speeds:
+        lines += [
+            "## Speed: one flow at 552x408, one thread (median thread CPU time)",
+            "",
+            "| back end | ms |",
+            "|---|---|",
+        ]
+        lines += [f"| {k} | {1000 * v:.1f} |" for k, v in speeds.items()]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, nargs="+", required=True, help="test split folders")
+    ap.add_argument("--flow", nargs="+", default=list(DEFAULT_FLOWS), help="flow back ends")
+    ap.add_argument("--weights", default=None, help="weights for 'learned' (default: shipped)")
+    ap.add_argument("--speed", nargs="*", default=None, help="back ends to time (default: --flow)")
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--write", action="store_true", help="write benchmarks/results/learned_flow.md")
+    args = ap.parse_args(argv)
+    for s in args.data:
+        list_clips(s)  # a bad folder stops here
+    flows = [
+        f"learned,weights={args.weights}" if f == "learned" and args.weights else f
+        for f in args.flow
+    ]
+    results: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
+    for truth in ("normal_flow", "flow"):
+        results[truth] = {}
+        for f in flows:
+            results[truth][f] = score(args.data, f, truth)
+            a = results[truth][f]["all"]
+            print(
+                f"{truth:11s} {f:40s} IoU {a['iou']:.3f} P {a['precision']:.3f} "
+                f"R {a['recall']:.3f} EPE>1 {a['epe_gt_gt1']:.2f}",
+                flush=True,
+            )
+    speeds = {f: speed(f, args.repeats) for f in (args.speed if args.speed is not None else flows)}
+    for f, v in speeds.items():
+        print(f"speed {f}: {1000 * v:.1f} ms")
+    text = report(results, speeds, args.data, args.weights or "shipped default")
+    if args.write:
+        write_results(RESULTS / "learned_flow.md", text)
+    else:
+        print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,355 @@
+"""A learned flow back end: DIS refined by a small network trained on cablesim's exact flow.
+
+The network does not search for correspondences itself.  DIS (OpenCV, CPU) gives a first flow;
+the network sees what that flow explains and what it does not, and corrects it:
+
+- the working image: both images resized so that their width is ``work_width`` px (never
+  enlarged), DIS ``dis_preset`` from image1 to image2 at that size;
+- the network's input (9 channels at the working size): image1 (RGB), image2 warped back by
+  the DIS flow (RGB: where the flow is right it reproduces image1), the DIS flow divided by
+  ``flow_norm``, and the photometric error ``mean_c |image1 - warped image2|``;
+- a small U-Net (a stride-2 encoder of ``widths`` channels at 1/2 .. 1/16 of the working
+  size, a decoder back to 1/2 with ``decoder`` channels, a head at the working size) returns a
+  correction of the flow (times ``flow_norm``) and a moving logit per pixel;
+- the flow is DIS plus the correction, resized to the input size; where the moving probability
+  is below ``gate`` (``None``: nowhere) it is zero, so a still background gives no motion.
+
+Why this design rather than a RAFT- or PWC-like network: it trains on a CPU in an hour from
+a few thousand simulated pairs (DIS already solves the large displacements a cost volume
+would have to learn), it runs at about 40 ms per 552x408 frame on one core (DIS at the
+working size is ~8 ms of it), and what it has to learn is exactly where DIS fails on cables:
+the motion it drags from a moving hose onto the still board beside it, and plain regions
+(``docs/perception.md`` has the measurements).
+
+Weights are a ``torch.save`` dict ``{"format": "cablesim-learned-flow", "version": 1,
+"config": {...LearnedFlowConfig...}, "state_dict": {...}, "meta": {...}}``, loaded with
+``weights_only=True``; a missing, truncated or mismatched file is refused with an
+:class:`~cablesim.errors.InputError` naming it.  The default weights ship inside the package
+(:data:`DEFAULT_WEIGHTS`, made by ``cablesim train`` from ``configs/learned_flow.json``);
+nothing is ever downloaded.  torch is imported on first use (``pip install 'cablesim[torch]'``).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, ClassVar
+
+import cv2
+import numpy as np
+
+from cablesim.config import Config, check_int, check_positive
+from cablesim.errors import ConfigError, InputError
+from cablesim.perception.flow import DIS_PRESETS, FlowEstimator, _check_pair
+
+WEIGHTS_FORMAT = "cablesim-learned-flow"
+WEIGHTS_VERSION = 1
+#: the shipped default model (``cablesim train``'s export of ``configs/learned_flow.json``)
+DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "learned_flow.pt"
+#: input channels: image1 RGB, warped image2 RGB, DIS flow (2), photometric error
+IN_CHANNELS = 9
+
+
+def _torch() -> Any:
+    try:
+        import torch  # lazy: optional heavy package
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise InputError(
+            "the learned flow back end needs torch: pip install 'cablesim[torch]'"
+        ) from e
+    return torch
+
+
+@dataclass(frozen=True)
+class LearnedFlowConfig(Config):
+    """The architecture and the pre-processing of a learned flow model (stored in its
+    weights file, so a file always rebuilds the network it was trained as)."""
+
+    SECTION: ClassVar[str] = "model"
+
+    widths: tuple[int, int, int, int] = (16, 32, 48, 64)  # encoder at 1/2, 1/4, 1/8, 1/16
+    decoder: tuple[int, int, int] = (48, 32, 16)  # decoder channels at 1/8, 1/4, 1/2
+    work_width: int = 276  # images are resized to this width (never enlarged)
+    dis_preset: str = "medium"  # DIS at the working size (no texture gate)
+    flow_norm: float = 10.0  # flows in and out of the network are in units of this (px)
+
+    def _validate(self) -> None:
+        for name in ("widths", "decoder"):
+            for i, w in enumerate(getattr(self, name)):
+                check_int(f"{self.SECTION}.{name}[{i}]", w, 1)
+        check_int(f"{self.SECTION}.work_width", self.work_width, 64)
+        if self.dis_preset not in ("ultrafast", "fast", "medium"):
+            raise ConfigError(
+                f"{self.SECTION}.dis_preset",
+                f"must be ultrafast, fast or medium, got {self.dis_preset!r}",
+            )
+        check_positive(f"{self.SECTION}.flow_norm", self.flow_norm)
+
+
+@lru_cache(maxsize=1)
+def _classes() -> dict[str, type]:
+    """Define the torch module on first use (keeps torch out of import time)."""
+    torch = _torch()
+    nn = torch.nn
+    F = torch.nn.functional
+
+    def block(cin: int, cout: int, stride: int = 1) -> Any:
+        return nn.Sequential(nn.Conv2d(cin, cout, 3, stride, 1), nn.LeakyReLU(0.1, inplace=True))
+
+    class RefineNet(nn.Module):
+        """DIS-refining U-Net (module docstring); ``forward(x)`` -> (B, 3, H, W): the flow
+        correction (2, in ``flow_norm`` units) and the moving logit."""
+
+        def __init__(self, cfg: LearnedFlowConfig) -> None:
+            super().__init__()
+            self.cfg = cfg
+            w, d = cfg.widths, cfg.decoder
+            self.enc = nn.ModuleList(
+                [
+                    nn.Sequential(block(cin, cout, 2), block(cout, cout))
+                    for cin, cout in zip((IN_CHANNELS, *w[:-1]), w, strict=True)
+                ]
+            )
+            self.dec = nn.ModuleList(
+                [
+                    block(w[3] + w[2], d[0]),
+                    block(d[0] + w[1], d[1]),
+                    block(d[1] + w[0], d[2]),
+                ]
+            )
+            self.head = nn.Conv2d(d[2] + IN_CHANNELS, 3, 3, 1, 1)
+            nn.init.zeros_(self.head.weight)  # starts as DIS itself, probability 1/2
+            nn.init.zeros_(self.head.bias)
+
+        def forward(self, x: Any) -> Any:
+            skips = []
+            y = x
+            for enc in self.enc:
+                y = enc(y)
+                skips.append(y)
+            for dec, skip in zip(self.dec, skips[-2::-1], strict=True):
+                y = F.interpolate(y, size=skip.shape[-2:], mode="bilinear", align_corners=False)
+                y = dec(torch.cat([y, skip], 1))
+            y = F.interpolate(y, size=x.shape[-2:], mode="bilinear", align_corners=False)
+            return self.head(torch.cat([y, x], 1))
+
+    return {"RefineNet": RefineNet}
+
+
+def build_model(config: LearnedFlowConfig | None = None) -> Any:
+    """A randomly initialised network of ``config`` (a ``torch.nn.Module``)."""
+    return _classes()["RefineNet"](config or LearnedFlowConfig())
+
+
+# ----------------------------------------------------------------------------- inputs
+def work_size(width: int, height: int, work_width: int) -> tuple[int, int]:
+    """(w, h) of the working images: ``width`` scaled to ``work_width`` (never enlarged),
+    the aspect kept."""
+    if width <= work_width:
+        return width, height
+    s = work_width / width
+    return work_width, max(1, round(height * s))
+
+
+def warp(image: np.ndarray, flow: np.ndarray) -> np.ndarray:
+    """``image`` sampled at ``p + flow(p)`` (bilinear, borders replicated)."""
+    h, w = flow.shape[:2]
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    return cv2.remap(
+        image,
+        gx + flow[..., 0],
+        gy + flow[..., 1],
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REPLICATE,
+    )
+
+
+def dis_flow(gray1: np.ndarray, gray2: np.ndarray, preset: str) -> np.ndarray:
+    """Ungated DIS flow of ``preset`` between two grey working images."""
+    dis = cv2.DISOpticalFlow_create(DIS_PRESETS[preset])
+    return np.ascontiguousarray(dis.calc(gray1, gray2, None), np.float32)
+
+
+def network_input(
+    rgb1: np.ndarray, rgb2: np.ndarray, flow: np.ndarray, flow_norm: float
+) -> np.ndarray:
+    """The 9xHxW float32 input of the network from two working-size RGB images and the DIS
+    flow between them (module docstring)."""
+    a = rgb1.astype(np.float32) / 255.0
+    b = warp(rgb2, flow).astype(np.float32) / 255.0
+    err = np.abs(a - b).mean(axis=2, keepdims=True)
+    x = np.concatenate([a - 0.5, b - 0.5, flow / np.float32(flow_norm), err], axis=2)
+    return np.ascontiguousarray(x.transpose(2, 0, 1), np.float32)
+
+
+def prepare(
+    rgb1: np.ndarray, rgb2: np.ndarray, cfg: LearnedFlowConfig
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """(network input, DIS flow at the working size, scale) for two full-size RGB images; the
+    same steps at training and at inference time."""
+    h, w = rgb1.shape[:2]
+    ww, wh = work_size(w, h, cfg.work_width)
+    if (ww, wh) != (w, h):
+        rgb1 = cv2.resize(rgb1, (ww, wh), interpolation=cv2.INTER_AREA)
+        rgb2 = cv2.resize(rgb2, (ww, wh), interpolation=cv2.INTER_AREA)
+    g1 = cv2.cvtColor(rgb1, cv2.COLOR_RGB2GRAY)
+    g2 = cv2.cvtColor(rgb2, cv2.COLOR_RGB2GRAY)
+    flow = dis_flow(g1, g2, cfg.dis_preset)
+    return network_input(rgb1, rgb2, flow, cfg.flow_norm), flow, ww / w
+
+
+# ----------------------------------------------------------------------------- weights
+def save_weights(
+    path: str | Path, model: Any, meta: dict[str, Any] | None = None, half: bool = False
+) -> Path:
+    """Write ``model``'s weights file (``half``: float16 tensors, half the size)."""
+    torch = _torch()
+    state = {
+        k: (v.detach().cpu().half() if half and v.is_floating_point() else v.detach().cpu())
+        for k, v in model.state_dict().items()
+    }
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    cfg = model.cfg.to_dict()
+    torch.save(
+        {
+            "format": WEIGHTS_FORMAT,
+            "version": WEIGHTS_VERSION,
+            "config": cfg,
+            "state_dict": state,
+            "meta": dict(meta or {}),
+        },
+        tmp,
+    )
+    os.replace(tmp, path)
+    return path
+
+
+def read_weights(path: str | Path) -> dict[str, Any]:
+    """The checked contents of a weights file; ``InputError`` naming the file otherwise."""
+    if path is None or str(path).strip() == "":
+        raise InputError("no learned flow weights file given (weights are never downloaded)")
+    path = Path(path)
+    if not path.is_file():
+        hint = (
+            " (the package ships it: reinstall cablesim, or make it with `cablesim train`)"
+            if path == DEFAULT_WEIGHTS
+            else " (weights are never downloaded: make them with `cablesim train`)"
+        )
+        raise InputError(f"learned flow weights not found: {path}{hint}")
+    torch = _torch()
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001 - torch raises many kinds for corrupt files
+        raise InputError(
+            f"cannot read learned flow weights {path}: truncated, corrupt or not a torch file "
+            f"({type(e).__name__}: {e})"
+        ) from e
+    if not isinstance(ckpt, dict) or ckpt.get("format") != WEIGHTS_FORMAT:
+        got = ckpt.get("format") if isinstance(ckpt, dict) else type(ckpt).__name__
+        raise InputError(f"{path} is not a cablesim learned flow weights file (format {got!r})")
+    if ckpt.get("version") != WEIGHTS_VERSION:
+        raise InputError(f"{path}: unsupported weights version {ckpt.get('version')!r}")
+    if not isinstance(ckpt.get("state_dict"), dict):
+        raise InputError(f"{path}: no state_dict")
+    try:
+        ckpt["config"] = LearnedFlowConfig.from_dict(ckpt.get("config"))
+    except (ConfigError, TypeError, AttributeError) as e:
+        raise InputError(f"{path}: bad model config: {e}") from e
+    return ckpt
+
+
+def load_model(path: str | Path) -> tuple[Any, dict[str, Any]]:
+    """(network in eval mode on the CPU, the file's meta) from a weights file."""
+    ckpt = read_weights(path)
+    model = build_model(ckpt["config"])
+    state = {k: v.float() if v.is_floating_point() else v for k, v in ckpt["state_dict"].items()}
+    try:
+        model.load_state_dict(state, strict=True)
+    except RuntimeError as e:
+        raise InputError(f"{path}: the weights do not match the network of its config: {e}") from e
+    return model.eval(), dict(ckpt.get("meta") or {})
+
+
+# ----------------------------------------------------------------------------- estimator
+class LearnedFlow(FlowEstimator):
+    """DIS refined by a network trained on cablesim's ground truth (module docstring).
+
+    ``weights``: a weights file (default: the shipped model, :data:`DEFAULT_WEIGHTS`);
+    ``gate``: the moving probability below which the flow is zero (``None``: never zeroed);
+    ``threads``: torch's intra-op threads (default: leave torch's setting alone);
+    ``work_width``: run at this working width instead of the model's (the network is
+    convolutional and trained across scales: a smaller width is the faster variant).
+    """
+
+    name = "learned"
+
+    def __init__(
+        self,
+        weights: str | Path | None = None,
+        gate: float | None = 0.5,
+        threads: int | None = None,
+        work_width: int | None = None,
+    ) -> None:
+        if gate is not None and not 0.0 <= float(gate) < 1.0:
+            raise InputError(f"learned flow gate must be in [0, 1) or None, got {gate!r}")
+        if threads is not None and (isinstance(threads, bool) or int(threads) < 1):
+            raise InputError(f"learned flow threads must be an integer >= 1, got {threads!r}")
+        self.weights = Path(weights) if weights is not None else DEFAULT_WEIGHTS
+        self.gate = None if gate is None else float(gate)
+        self.threads = None if threads is None else int(threads)
+        self.model, self.meta = load_model(self.weights)
+        self.cfg: LearnedFlowConfig = self.model.cfg
+        if work_width is not None:
+            try:
+                self.cfg = self.cfg.replace(work_width=work_width)
+            except ConfigError as e:
+                raise InputError(f"learned flow work_width: {e}") from e
+
+    def predict(self, image1: np.ndarray, image2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(flow HxWx2 float32 before the gate, moving probability HxW float32) in image1's
+        pixels at the input size."""
+        torch = _torch()
+        _check_pair(image1, image2)
+        rgb1, rgb2 = (_rgb(image1), _rgb(image2))
+        h, w = rgb1.shape[:2]
+        x, dis, scale = prepare(rgb1, rgb2, self.cfg)
+        old = torch.get_num_threads()
+        if self.threads is not None:
+            torch.set_num_threads(self.threads)
+        try:
+            with torch.inference_mode():
+                out = self.model(torch.from_numpy(x)[None])[0].numpy()
+        finally:
+            if self.threads is not None:
+                torch.set_num_threads(old)
+        flow = dis + out[:2].transpose(1, 2, 0) * np.float32(self.cfg.flow_norm)
+        prob = 1.0 / (1.0 + np.exp(-out[2]))
+        if scale != 1.0:
+            flow = cv2.resize(flow, (w, h), interpolation=cv2.INTER_LINEAR) / np.float32(scale)
+            prob = cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
+        return np.ascontiguousarray(flow, np.float32), np.ascontiguousarray(prob, np.float32)
+
+    def compute(self, image1: np.ndarray, image2: np.ndarray) -> np.ndarray:
+        flow, prob = self.predict(image1, image2)
+        if self.gate is not None:
+            flow[prob < self.gate] = 0.0
+        return flow
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "weights": str(self.weights),
+            "gate": self.gate,
+            "config": self.cfg.to_dict(),
+            "trained": {k: self.meta[k] for k in ("commit", "run", "steps") if k in self.meta},
+        }
+
+
+def _rgb(img: np.ndarray) -> np.ndarray:
+    if img.ndim == 2:
+        return np.ascontiguousarray(np.repeat(img[..., None], 3, axis=2))
+    return np.ascontiguousarray(img[..., :3])
