@@ -221,7 +221,7 @@ class DISFlow(FlowEstimator):
             raise InputError(
                 f"DIS patch_stride {patch_stride} exceeds the patch size {self._dis.getPatchSize()}"
             )
-        self._gate_cache: tuple[int, np.ndarray] | None = None
+        self._gate_cache: tuple[int, np.ndarray] | None = None  # (hash of shape and pixels, gate)
         # (gate, ~gate as uint8, a zero flow): the masked copy's operands, kept per target
         self._holes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
@@ -251,7 +251,7 @@ class DISFlow(FlowEstimator):
 
     def _gate(self, gray1: np.ndarray) -> np.ndarray:
         # the target image is the first image of every call: cache its gate
-        key = hash(gray1.tobytes())
+        key = hash((gray1.shape, gray1.tobytes()))
         if self._gate_cache is not None and self._gate_cache[0] == key:
             return self._gate_cache[1]
         m = texture_mask(gray1, self.gate.window, self.gate.threshold)
@@ -271,8 +271,6 @@ class DISFlow(FlowEstimator):
             # assignment, by OpenCV's masked copy with the inverted mask kept per target (a
             # fifth of the time of NumPy's broadcast copy)
             holes, zeros = self._holes[1], self._holes[2]
-            if zeros.shape != flow.shape:
-                zeros = np.zeros_like(flow)
             cv2.copyTo(zeros, holes, flow)
         return flow
 

@@ -107,3 +107,19 @@ def test_bad_images():
         DISFlow("slowest")
     with pytest.raises(InputError, match="unknown flow"):
         make_flow("lucas-kanade")
+
+
+def test_the_gate_cache_tells_images_of_the_same_bytes_apart_by_shape():
+    """The gate is cached per target image; two targets with the same pixel bytes but other
+    shapes (120x160 and 160x120) must each get their own gate."""
+    from cablesim.perception.flow import DISFlow, texture_mask
+
+    rng = np.random.default_rng(3)
+    flat = np.zeros(120 * 160, np.uint8)
+    flat[: 120 * 80] = rng.integers(0, 255, 120 * 80, dtype=np.uint8)  # textured half
+    dis = DISFlow(preset="medium")
+    for shape in ((120, 160), (160, 120)):
+        img = flat.reshape(shape)
+        flow = dis.compute(img, img)
+        assert flow.shape == (*shape, 2)
+        np.testing.assert_array_equal(dis._gate(img), texture_mask(img))
