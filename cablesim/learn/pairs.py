@@ -137,7 +137,7 @@ def find_clips(splits: list[Path] | tuple[Path, ...]) -> list[ClipRef]:
 # ----------------------------------------------------------------------------- one sample
 @dataclass
 class Sample:
-    """One training pair at the working size: the network input (9xHxW), the DIS flow and
+    """One training pair at the working size: the network input (13xHxW), the DIS flow and
     the exact flow (2xHxW, px), the known pixels and the moving fraction (HxW)."""
 
     x: np.ndarray

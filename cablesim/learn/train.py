@@ -136,7 +136,7 @@ class TrainConfig(Config):
     lr: float = 2e-3  # AdamW, cosine decay to lr_min
     lr_min: float = 2e-5
     weight_decay: float = 1e-4
-    moving_weight: float = 4.0  # extra weight of the flow error on moving pixels
+    moving_weight: float = 1.0  # weight of the moving pixels' mean flow error (still: 1)
     bce_weight: float = 0.5  # weight of the moving probability's cross-entropy
     log_every: int = 25
     val_every: int = 250  # validation and checkpoint
@@ -225,16 +225,19 @@ def ensure_data(cfg: DataConfig, workers: int, ray: str | None, say: Progress) -
 
 
 def clips_of(record: dict, split: str) -> list[ClipRef]:
+    """The clips ``record`` lists for ``split`` (a folder may hold more: other seed ranges)."""
+    wanted = {(str(r["folder"]), str(r["clip"])) for r in record[split]}
     folders = sorted({Path(r["folder"]) for r in record[split]}, key=str)
-    return find_clips(folders)
+    return [c for c in find_clips(folders) if (str(c.split), c.clip) in wanted]
 
 
 # ----------------------------------------------------------------------------- metrics
 def moving_iou(pred: np.ndarray, truth: np.ndarray, known: np.ndarray) -> float:
-    """IoU of two boolean masks over the known pixels (1 where both are empty)."""
+    """IoU of two boolean masks over the known pixels (NaN where both are empty, as the
+    published evaluation: such pairs do not count)."""
     p, t = pred & known, truth & known
     union = np.count_nonzero(p | t)
-    return 1.0 if union == 0 else np.count_nonzero(p & t) / union
+    return math.nan if union == 0 else np.count_nonzero(p & t) / union
 
 
 def flow_scores(
@@ -263,17 +266,21 @@ def _lr(cfg: TrainConfig, step: int) -> float:
 
 
 def _loss(torch: Any, out: Any, batch: dict[str, Any], cfg: TrainConfig) -> tuple[Any, Any, Any]:
+    """Class-balanced losses: the moving pixels are a percent or two of a crop, so the mean
+    error over the still pixels and the mean over the moving ones (times ``moving_weight``)
+    are added, and the moving probability's cross-entropy is the mean of the two classes'
+    (with plain pixel means a network learns that nothing moves, and stays there)."""
     F = torch.nn.functional
     norm = cfg.model.flow_norm
     pred = batch["dis"] + out[:, :2] * norm
     valid = batch["valid"]
     moving = batch["moving"]
+    w_move, w_still = valid * moving, valid * (1.0 - moving)
+    n_move, n_still = w_move.sum().clamp(min=1.0), w_still.sum().clamp(min=1.0)
     err = (pred - batch["flow"]).abs().sum(1)  # L1 per pixel, px
-    w = valid * (1.0 + cfg.moving_weight * moving)
-    flow_l1 = (err * w).sum() / w.sum().clamp(min=1.0)
-    # the moving pixels are a few percent: they weigh as much more as in the flow term
-    bce = F.binary_cross_entropy_with_logits(out[:, 2], moving, weight=w, reduction="sum")
-    bce = bce / w.sum().clamp(min=1.0)
+    flow_l1 = (err * w_still).sum() / n_still + cfg.moving_weight * (err * w_move).sum() / n_move
+    bce = F.binary_cross_entropy_with_logits(out[:, 2], moving, reduction="none")
+    bce = 0.5 * ((bce * w_still).sum() / n_still + (bce * w_move).sum() / n_move)
     return flow_l1 + cfg.bce_weight * bce, flow_l1, bce
 
 

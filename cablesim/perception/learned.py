@@ -5,9 +5,11 @@ the network sees what that flow explains and what it does not, and corrects it:
 
 - the working image: both images resized so that their width is ``work_width`` px (never
   enlarged), DIS ``dis_preset`` from image1 to image2 at that size;
-- the network's input (9 channels at the working size): image1 (RGB), image2 warped back by
-  the DIS flow (RGB: where the flow is right it reproduces image1), the DIS flow divided by
-  ``flow_norm``, and the photometric error ``mean_c |image1 - warped image2|``;
+- the network's input (13 channels at the working size): image1 and image2 (RGB), image2
+  warped back by the DIS flow (RGB: where the flow is right it reproduces image1), the DIS
+  flow divided by ``flow_norm``, and the photometric errors ``mean_c |image1 - warped
+  image2|`` and ``mean_c |image1 - image2|`` (what no motion would leave: on a plain board
+  DIS reports motion that the warp explains no better than standing still);
 - a small U-Net (a stride-2 encoder of ``widths`` channels at 1/2 .. 1/16 of the working
   size, a decoder back to 1/2 with ``decoder`` channels, a head at the working size) returns a
   correction of the flow (times ``flow_norm``) and a moving logit per pixel;
@@ -48,8 +50,9 @@ WEIGHTS_FORMAT = "cablesim-learned-flow"
 WEIGHTS_VERSION = 1
 #: the shipped default model (``cablesim train``'s export of ``configs/learned_flow.json``)
 DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "learned_flow.pt"
-#: input channels: image1 RGB, warped image2 RGB, DIS flow (2), photometric error
-IN_CHANNELS = 9
+#: input channels: image1 RGB, image2 RGB, image2 warped by DIS RGB, DIS flow (2), the
+#: photometric errors of the warped and of the unwarped image2
+IN_CHANNELS = 13
 
 
 def _torch() -> Any:
@@ -175,12 +178,14 @@ def dis_flow(gray1: np.ndarray, gray2: np.ndarray, preset: str) -> np.ndarray:
 def network_input(
     rgb1: np.ndarray, rgb2: np.ndarray, flow: np.ndarray, flow_norm: float
 ) -> np.ndarray:
-    """The 9xHxW float32 input of the network from two working-size RGB images and the DIS
+    """The 13xHxW float32 input of the network from two working-size RGB images and the DIS
     flow between them (module docstring)."""
     a = rgb1.astype(np.float32) / 255.0
-    b = warp(rgb2, flow).astype(np.float32) / 255.0
-    err = np.abs(a - b).mean(axis=2, keepdims=True)
-    x = np.concatenate([a - 0.5, b - 0.5, flow / np.float32(flow_norm), err], axis=2)
+    b = rgb2.astype(np.float32) / 255.0
+    w = warp(rgb2, flow).astype(np.float32) / 255.0
+    err = np.abs(a - w).mean(axis=2, keepdims=True)
+    still = np.abs(a - b).mean(axis=2, keepdims=True)
+    x = np.concatenate([a - 0.5, b - 0.5, w - 0.5, flow / np.float32(flow_norm), err, still], 2)
     return np.ascontiguousarray(x.transpose(2, 0, 1), np.float32)
 
 

@@ -56,7 +56,7 @@ def test_a_pair_carries_the_exact_flow_of_the_clip(clips):
     k = clip.indices[3]
     rng = np.random.default_rng(0)
     s = make_pair(clip.rgb(k), clip.rgb(1), clip.flow(k), None, SMALL, PLAIN, rng)
-    assert s.x.shape == (9, 128, 160) and s.flow.shape == (2, 128, 160)
+    assert s.x.shape == (13, 128, 160) and s.flow.shape == (2, 128, 160)
     sx, sy = shifts[clip.clip][3]
     on_band = s.moving > 0.5
     assert on_band.sum() > 200  # centred on the moving band
@@ -123,15 +123,16 @@ def _config(root, steps):
 def test_training_improves_on_its_dis_input(clips, tmp_path):
     """A striped band sliding over a textured background: DIS drags the band's motion onto
     the background beside it and misjudges plain regions; forty steps of training cut the
-    validation clip's flow error over the known pixels to well below DIS's (to 0.50-0.63 of
+    validation clip's flow error over the known pixels to well below DIS's (to 0.62-0.72 of
     it over seeds 0-3 when this test was written) and the training loss falls."""
     root, _ = clips
     weights = train(_config(root, 40), tmp_path / "run", workers=1, progress=False)
     last = _rows(tmp_path / "run" / "validation.csv")[-1]
     assert last["step"] == 40
     assert last["epe"] < 0.8 * last["dis_epe"]
-    log = _rows(tmp_path / "run" / "log.csv")
-    assert log[-1]["loss"] < log[0]["loss"]
+    loss = [r["loss"] for r in _rows(tmp_path / "run" / "log.csv")]  # every 5th step
+    half = len(loss) // 2
+    assert np.mean(loss[half:]) < np.mean(loss[:half])
     for name in ("config.json", "provenance.json", "data.json", "log.csv", "loss.png"):
         assert (tmp_path / "run" / name).is_file(), name
     assert read_weights(weights)["meta"]["steps"] == 40
