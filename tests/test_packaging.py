@@ -114,6 +114,7 @@ def test_the_wheel_holds_every_runtime_file(wheel: tuple[Path, str]) -> None:
         "cablesim/assets/panda/LICENSE-2.0.txt",
         "cablesim/calibration/board.py",
         "cablesim/twin/replay.py",
+        "cablesim/perception/weights/learned_flow.pt",
     ):
         assert name in names
     packaged = {n for n in names if not n.startswith("cablesim-")}
