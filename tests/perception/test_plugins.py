@@ -117,6 +117,7 @@ def test_builtins_are_registered_by_name():
         "dis-fine",
         "farneback",
         "raft",
+        "learned",
         "oracle",
     ]
     assert tuple(SEGMENTATION_METHODS.builtins()) == METHODS
@@ -136,7 +137,7 @@ def test_unknown_names_list_the_choices():
         make_flow("magic")
     msg = str(e.value)
     assert msg.startswith("unknown flow back end 'magic'; choose one of dis, dis-ultrafast")
-    assert "farneback, raft, oracle" in msg and "MODULE:CLASS" in msg
+    assert "farneback, raft, learned, oracle" in msg and "MODULE:CLASS" in msg
     assert msg in DOCS.read_text()  # the page shows the message as it is
     with pytest.raises(InputError) as e:
         make_method("magic")
