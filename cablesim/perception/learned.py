@@ -16,12 +16,13 @@ the network sees what that flow explains and what it does not, and corrects it:
 - the flow is DIS plus the correction, resized to the input size; where the moving probability
   is below ``gate`` (``None``: nowhere) it is zero, so a still background gives no motion.
 
-Why this design rather than a RAFT- or PWC-like network: it trains on a CPU in an hour from
-a few thousand simulated pairs (DIS already solves the large displacements a cost volume
-would have to learn), it runs at about 40 ms per 552x408 frame on one core (DIS at the
-working size is ~8 ms of it), and what it has to learn is exactly where DIS fails on cables:
-the motion it drags from a moving hose onto the still board beside it, and plain regions
-(``docs/perception.md`` has the measurements).
+Why this design rather than a RAFT- or PWC-like network: it trains on a 2-core CPU in
+minutes from a few thousand simulated pairs (DIS already solves the large displacements a
+cost volume would have to learn), it runs at about 47 ms per 552x408 frame on one core, and
+what it has to learn is where DIS fails on cables: the motion it drags from a moving hose onto
+the still board beside it, and the noise it reports on plain regions.  The shipped weights
+do not beat DIS yet, in simulation or on real frames (``docs/perception.md`` has the
+measurements and what is missing).
 
 Weights are a ``torch.save`` dict ``{"format": "cablesim-learned-flow", "version": 1,
 "config": {...LearnedFlowConfig...}, "state_dict": {...}, "meta": {...}}``, loaded with
@@ -42,7 +43,7 @@ from typing import Any, ClassVar
 import cv2
 import numpy as np
 
-from cablesim.config import Config, check_int, check_positive
+from cablesim.config import Config, check_int, check_positive, is_int, is_real
 from cablesim.errors import ConfigError, InputError
 from cablesim.perception.flow import DIS_PRESETS, FlowEstimator, _check_pair
 
@@ -299,9 +300,9 @@ class LearnedFlow(FlowEstimator):
         threads: int | None = None,
         work_width: int | None = None,
     ) -> None:
-        if gate is not None and not 0.0 <= float(gate) < 1.0:
+        if gate is not None and not (is_real(gate) and 0.0 <= float(gate) < 1.0):
             raise InputError(f"learned flow gate must be in [0, 1) or None, got {gate!r}")
-        if threads is not None and (isinstance(threads, bool) or int(threads) < 1):
+        if threads is not None and not (is_int(threads) and int(threads) >= 1):
             raise InputError(f"learned flow threads must be an integer >= 1, got {threads!r}")
         self.weights = Path(weights) if weights is not None else DEFAULT_WEIGHTS
         self.gate = None if gate is None else float(gate)

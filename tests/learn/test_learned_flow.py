@@ -178,6 +178,10 @@ def test_bad_weights_files_are_refused_naming_the_file(tmp_path):
     missing = tmp_path / "none.pt"
     with pytest.raises(InputError, match="none.pt"):
         LearnedFlow(missing)
+    with pytest.raises(InputError, match="gate"):
+        make_flow("learned,gate=abc")
+    with pytest.raises(InputError, match="threads"):
+        make_flow("learned,threads=0")
     good = save_weights(tmp_path / "w.pt", build_model(SMALL))
     cut = tmp_path / "cut.pt"
     cut.write_bytes(good.read_bytes()[: good.stat().st_size // 2])
