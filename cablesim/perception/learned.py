@@ -46,6 +46,7 @@ import numpy as np
 from cablesim.config import Config, check_int, check_positive, is_int, is_real
 from cablesim.errors import ConfigError, InputError
 from cablesim.perception.flow import DIS_PRESETS, FlowEstimator, _check_pair
+from cablesim.perception.torchfile import import_torch, load_torch_file
 
 WEIGHTS_FORMAT = "cablesim-learned-flow"
 WEIGHTS_VERSION = 1
@@ -57,13 +58,7 @@ IN_CHANNELS = 13
 
 
 def _torch() -> Any:
-    try:
-        import torch  # lazy: optional heavy package
-    except ImportError as e:  # pragma: no cover - depends on the environment
-        raise InputError(
-            "the learned flow back end needs torch: pip install 'cablesim[torch]'"
-        ) from e
-    return torch
+    return import_torch("the learned flow back end")
 
 
 @dataclass(frozen=True)
@@ -246,14 +241,7 @@ def read_weights(path: str | Path) -> dict[str, Any]:
             else " (weights are never downloaded: make them with `cablesim train`)"
         )
         raise InputError(f"learned flow weights not found: {path}{hint}")
-    torch = _torch()
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # noqa: BLE001 - torch raises many kinds for corrupt files
-        raise InputError(
-            f"cannot read learned flow weights {path}: truncated, corrupt or not a torch file "
-            f"({type(e).__name__}: {e})"
-        ) from e
+    ckpt = load_torch_file(path, "learned flow weights")
     if not isinstance(ckpt, dict) or ckpt.get("format") != WEIGHTS_FORMAT:
         got = ckpt.get("format") if isinstance(ckpt, dict) else type(ckpt).__name__
         raise InputError(f"{path} is not a cablesim learned flow weights file (format {got!r})")

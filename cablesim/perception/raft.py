@@ -28,17 +28,14 @@ import numpy as np
 
 from cablesim.errors import InputError
 from cablesim.perception.flow import FlowEstimator, _check_pair
+from cablesim.perception.torchfile import import_torch, load_torch_file
 
 CHECKPOINT_FORMAT = "cablesim-raft"
 CHECKPOINT_VERSION = 1
 
 
 def _torch() -> Any:
-    try:
-        import torch  # lazy: optional heavy package
-    except ImportError as e:  # pragma: no cover - depends on the environment
-        raise InputError("the RAFT back end needs torch: pip install 'cablesim[torch]'") from e
-    return torch
+    return import_torch("the RAFT back end")
 
 
 @dataclass(frozen=True)
@@ -242,14 +239,7 @@ def check_checkpoint_file(path: str | Path) -> Path:
 def load_raft(path: str | Path, device: str = "cpu") -> Any:
     """Load a checkpoint written by :func:`save_raft_checkpoint`; clear errors otherwise."""
     path = check_checkpoint_file(path)
-    torch = _torch()
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # noqa: BLE001 - torch raises many kinds for corrupt files
-        raise InputError(
-            f"cannot read RAFT checkpoint {path}: corrupt or not a torch file "
-            f"({type(e).__name__}: {e})"
-        ) from e
+    ckpt = load_torch_file(path, "RAFT checkpoint")
     if not isinstance(ckpt, dict) or ckpt.get("format") != CHECKPOINT_FORMAT:
         raise InputError(
             f"{path} is not a cablesim RAFT checkpoint (format "
