@@ -121,7 +121,7 @@ class FrankyPanda(ArmModelChecks, Robot):
     objects (otherwise connected to ``host``); ``gripper=False`` runs without a hand.
     ``rest_velocity`` (rad/s), ``rest_window`` and ``rest_timeout`` (s): a motion starts only
     from rest, when no joint moved faster than ``rest_velocity`` on average over the last
-    ``rest_window``; an arm still moving after ``rest_timeout`` fails the motion (``MoveResult``
+    ``rest_window`` of the robot's clock (the states' timestamps); an arm still moving after ``rest_timeout`` fails the motion (``MoveResult``
     reason ``"arm not at rest: ..."``) without sending it.  The average over a window, not the
     measured ``dq`` of one state, because a position-controlled arm holding still chatters:
     franka-sim's arm reports up to 0.4 rad/s of sign-flipping ``dq`` at a standstill.
@@ -367,23 +367,42 @@ class FrankyPanda(ArmModelChecks, Robot):
         motion = fr.JointMotion(q, fr.ReferenceType.Absolute, factor)
         return self._run(motion, None, q)
 
+    def _timed_joints(self) -> tuple[np.ndarray, float]:
+        """The measured joint positions and the robot's own timestamp (s) of that state."""
+        state = self.robot.state
+        return np.asarray(state.q, dtype=float).reshape(7).copy(), state.time.to_sec()
+
     def wait_for_rest(self) -> str:
         """Wait until the arm is at rest (see the class docstring); empty when it is, else the
-        reason, after ``rest_timeout``."""
+        reason, after ``rest_timeout``.
+
+        Speeds are measured on the robot's clock (the timestamps of its states), not the
+        host's: a state stream that stalls (a loaded host, where the simulated robot or
+        libfranka's thread misses cycles; a dropped connection) shows the same joint angles
+        for a while, which over host time would read as rest while the arm still moves.  A
+        window counts only once the robot's clock has advanced by half of ``rest_window``."""
         deadline = time.monotonic() + self.rest_timeout
-        q0, t0 = self.joint_positions, time.monotonic()
+        q0, t0 = self._timed_joints()
+        speed = float("nan")
         while True:
             time.sleep(self.rest_window)
-            q1, t1 = self.joint_positions, time.monotonic()
-            speed = float(np.max(np.abs(q1 - q0))) / max(t1 - t0, 1e-6)
-            if speed <= self.rest_velocity:
-                return ""
-            if t1 >= deadline:
+            q1, t1 = self._timed_joints()
+            if t1 - t0 >= self.rest_window / 2:
+                speed = float(np.max(np.abs(q1 - q0))) / (t1 - t0)
+                if speed <= self.rest_velocity:
+                    return ""
+                q0, t0 = q1, t1
+            if time.monotonic() >= deadline:
+                if speed != speed:  # no window counted: the robot's states did not advance
+                    return (
+                        f"arm not at rest: the robot's clock advanced {1000 * (t1 - t0):.0f} ms "
+                        f"in {self.rest_timeout:.1f} s, too little to measure its speed (rest_window "
+                        f"{self.rest_window} s)"
+                    )
                 return (
                     f"arm not at rest: a joint moved at {speed:.3f} rad/s (rest_velocity "
                     f"{self.rest_velocity} rad/s) {self.rest_timeout:.1f} s after the motion was asked"
                 )
-            q0, t0 = q1, t1
 
     def _run(
         self, motion: Any, target: Pose | None, q_target: np.ndarray | None = None
