@@ -4,7 +4,7 @@ Timing scripts (``python -m benchmarks.<name>``): ``bench_sim``, ``bench_render`
 ``bench_perception``, ``bench_episode``, ``episode_variants``, ``bench_throughput``,
 ``bench_solver``, ``bench_env``, ``soak_env``, ``bench_twin``, ``franka_sim_timing``, and the
 seed sweep ``seeds`` (its runner is :mod:`cablesim.sweep`), the cable kinds side by side
-``cable_kinds``, and flow back ends on real frames (the published MovingCables videos in
+``cable_kinds``, sleeping islands on and off ``sleep_islands``, and flow back ends on real frames (the published MovingCables videos in
 ``benchmarks/data/movingcables/``, for evaluation only) ``real_clips``.  Experiments of the thesis's
 perception (``python -m benchmarks.experiments.<name>``): ``realistic_flow`` (record, evaluate,
 report), ``compare_methods``, ``compare_published``, ``published_reference``.  Each writes its

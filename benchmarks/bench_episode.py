@@ -4,7 +4,7 @@ target frame), ground truth (flow from the target frame to every kept frame) and
 CPU perception (``segment_stream(stream, method="correlation", flow="dis")``).
 
     .venv/bin/python -m benchmarks.bench_episode [--seed 2] [--repeats 3] [--write]
-        [--json-out FILE] [--baseline FILE]
+        [--json-out FILE] [--baseline FILE] [--set FIELD=VALUE ...]
 
 Default settings: 640x480, 4 hoses, one grasp, two actions of 3 periods.  The scene is built
 (its settled state cached) and the start segment picked before timing; each repeat resets the
@@ -14,8 +14,10 @@ is pinned to one core and runs single-threaded BLAS/OpenCV/llvmpipe (see
 is the primary measure, wall time is reported beside it with the load average.
 
 ``--json-out`` saves the runs; ``--baseline`` adds a before/after table from such a file (e.g.
-this script run against an older commit with ``PYTHONPATH=<old checkout>``).  ``--write``
-writes ``benchmarks/results/episode.md``.
+this script run against an older commit with ``PYTHONPATH=<old checkout>``, or with other
+settings: ``--set physics.sleep_tolerance=0.001``).  ``--set`` changes one field of the
+episode config (as ``cablesim explore --set``).  ``--write`` writes
+``benchmarks/results/episode.md``.
 """
 
 from __future__ import annotations
@@ -63,15 +65,21 @@ def main() -> int:
     ap.add_argument("--no-pin", action="store_true", help="do not pin to one CPU core")
     ap.add_argument("--json-out", type=Path, help="save the runs as JSON")
     ap.add_argument("--baseline", type=Path, help="JSON of an earlier run for a before/after table")
+    ap.add_argument(
+        "--set", action="append", default=[], metavar="FIELD=VALUE", help="a config field"
+    )
     args = ap.parse_args()
     single_thread_environment()  # before the first rendering (and the workers)
 
     core = None if args.no_pin else pin_to_one_core()
     load_start = uptime()
+    from cablesim.config import override
     from cablesim.sim.config import EpisodeConfig
     from cablesim.sim.session import SimSession
 
     cfg = EpisodeConfig.of(seed=args.seed, hose=args.hose)
+    for assignment in args.set:
+        cfg = override(cfg, assignment)
     session = SimSession.build(cfg)
     segment = session.pick_start()
     hose = session.hose
@@ -104,6 +112,7 @@ def main() -> int:
         seed=args.seed,
         hose=hose,
         repeats=args.repeats,
+        settings=list(args.set),
         deterministic=len(digests) == 1,
     )
     if args.json_out:

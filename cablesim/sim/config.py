@@ -622,6 +622,13 @@ class PhysicsConfig(Config):
     # ``max_hose_strain``.
     rescue_strain: float = 0.2
     rescue_time: float = 0.5
+    # MuJoCo's sleeping islands: > 0 turns them on with this velocity tolerance (m/s on the
+    # hoses' vertex joints, rad/s on hinges).  An island (bodies joined by constraints:
+    # a hose's edges, contacts, its end couplings) whose every degree of freedom stays
+    # slower than this for 10 steps is put to sleep: its velocity is set to zero and it costs
+    # no collision or constraint solving until something awake touches it, or a force is
+    # applied to it (the neighbour perturbation).  0 (the default) keeps everything awake.
+    sleep_tolerance: float = 0.0
 
     def _validate(self) -> None:
         if not 0 < self.timestep <= 0.016:
@@ -637,6 +644,8 @@ class PhysicsConfig(Config):
         check_number("physics.max_hose_strain", self.max_hose_strain, 1e-4, 10.0)
         check_positive("physics.rescue_strain", self.rescue_strain, allow_zero=True)
         check_positive("physics.rescue_time", self.rescue_time)
+        check_positive("physics.sleep_tolerance", self.sleep_tolerance, allow_zero=True)
+        check_number("physics.sleep_tolerance", self.sleep_tolerance, hi=1.0)
         if self.rescue_strain >= self.max_hose_strain:
             raise ConfigError(
                 "physics.rescue_strain",

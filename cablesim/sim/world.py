@@ -199,7 +199,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
 <mujoco model="cablesim_task_board">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{cfg.physics.timestep!r}" integrator="discrete" gravity="0 0 {cfg.physics.gravity}"
-          cone="elliptic" impratio="10" solver="{cfg.physics.solver}"/>
+          cone="elliptic" impratio="10" solver="{cfg.physics.solver}"{_sleep_xml(cfg.physics)}
   <size memory="64M"/>
   <visual>
     <global offwidth="{max(1280, cfg.camera.width)}" offheight="{max(720, cfg.camera.height)}"/>
@@ -236,6 +236,16 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     {"".join(equalities)}
   </equality>
 </mujoco>"""
+
+
+def _sleep_xml(physics) -> str:
+    """The end of the ``<option>`` element: MuJoCo's sleeping islands when
+    ``physics.sleep_tolerance`` > 0 (see :class:`~cablesim.sim.config.PhysicsConfig`)."""
+    if physics.sleep_tolerance <= 0:
+        return "/>"
+    return (
+        f' sleep_tolerance="{physics.sleep_tolerance!r}">\n    <flag sleep="enable"/>\n  </option>'
+    )
 
 
 def _background_material(
@@ -637,6 +647,12 @@ class World:
                 f"state has shape {state.shape}, the model needs "
                 f"({mujoco.mj_stateSize(self.model, spec)},)"
             )
+        if self.model.opt.enableflags & mujoco.mjtEnableBit.mjENBL_SLEEP:
+            # which trees sleep is not part of MuJoCo's state vector: start every restored
+            # state with all of them awake, as in a fresh MjData, so that a state gives the
+            # same steps whether it was just settled, loaded from the cache or reset to
+            # (writing ``data.tree_asleep`` directly leaves MuJoCo's awake lists stale)
+            mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_setState(self.model, self.data, state, spec)
         mujoco.mj_forward(self.model, self.data)
 
