@@ -121,8 +121,9 @@ class FrankyPanda(ArmModelChecks, Robot):
     objects (otherwise connected to ``host``); ``gripper=False`` runs without a hand.
     ``rest_velocity`` (rad/s), ``rest_window`` and ``rest_timeout`` (s): a motion starts only
     from rest, when no joint moved faster than ``rest_velocity`` on average over the last
-    ``rest_window`` of the robot's clock (the states' timestamps); an arm still moving after ``rest_timeout`` fails the motion (``MoveResult``
-    reason ``"arm not at rest: ..."``) without sending it.  The average over a window, not the
+    ``rest_window`` of the robot's clock (the states' timestamps); an arm still moving after
+    ``rest_timeout`` fails the motion (``MoveResult`` reason ``"arm not at rest: ..."``)
+    without sending it.  The average over a window, not the
     measured ``dq`` of one state, because a position-controlled arm holding still chatters:
     franka-sim's arm reports up to 0.4 rad/s of sign-flipping ``dq`` at a standstill.
     """
