@@ -46,6 +46,13 @@ SURFACE_VIEWS: Mapping[str, tuple[tuple[float, float, float], tuple[float, float
     "board": ((-0.42, 0.0, 0.62), (0.62, 0.0, 0.46)),
     "table": ((0.35, -0.42, 0.60), (0.35, -0.10, 0.0)),
 }
+#: Each surface's MuJoCo ``impratio`` (the friction-to-normal impedance ratio of the elliptic
+#: cones), where ``physics.impratio`` is None.  MuJoCo's soft friction lets a contact slip at a
+#: speed that grows with the tangential force it holds, and a higher ratio shrinks that slip.
+#: On the board the hoses hang, and 10 holds them still.  On the table a cable plugged at both
+#: ends presses its bend sideways on the mat and on the cables it crosses: at 10 it crept at
+#: 2-4 mm/s for 20 s and more (seed 11), at 100 at 0.3 mm/s, under ``physics.settle_speed``.
+SURFACE_IMPRATIO: Mapping[str, float] = {"board": 10.0, "table": 100.0}
 
 # Sanity bounds that keep MuJoCo away from degenerate models (the table top is the box
 # x in [TABLE_X[0], TABLE_X[1]], |y| <= TABLE_HALF_WIDTH; see cablesim.sim.world).
@@ -629,6 +636,9 @@ class PhysicsConfig(Config):
     # no collision or constraint solving until something awake touches it, or a force is
     # applied to it (the neighbour perturbation).  0 (the default) keeps everything awake.
     sleep_tolerance: float = 0.0
+    # MuJoCo's impratio for the elliptic friction cones; None: the surface's
+    # (:data:`SURFACE_IMPRATIO`; ``SceneConfig.impratio()`` resolves it)
+    impratio: float | None = None
 
     def _validate(self) -> None:
         if not 0 < self.timestep <= 0.016:
@@ -646,6 +656,8 @@ class PhysicsConfig(Config):
         check_positive("physics.rescue_time", self.rescue_time)
         check_positive("physics.sleep_tolerance", self.sleep_tolerance, allow_zero=True)
         check_number("physics.sleep_tolerance", self.sleep_tolerance, hi=1.0)
+        if self.impratio is not None:
+            check_number("physics.impratio", self.impratio, 1.0, 1000.0)
         if self.rescue_strain >= self.max_hose_strain:
             raise ConfigError(
                 "physics.rescue_strain",
@@ -708,6 +720,11 @@ class SceneConfig(Config):
             position if c.position is None else tuple(c.position),  # type: ignore[return-value]
             look_at if c.look_at is None else tuple(c.look_at),  # type: ignore[return-value]
         )
+
+    def impratio(self) -> float:
+        """MuJoCo's impratio: ``physics.impratio``, or the surface's where None."""
+        p = self.physics.impratio
+        return SURFACE_IMPRATIO[self.surface] if p is None else float(p)
 
     def connector_count(self) -> int:
         """How many connectors (board) or sockets (table) the surface has."""

@@ -9,7 +9,8 @@ A start shape leaves its socket along the socket's yaw, climbs within the first 
 centimetres to its own height (cable ``rank`` r lies at ``radius + 2 mm + r (2.2 r_max + 2 mm)``
 above the table, so that no two start shapes touch) and wanders through two to four points
 drawn in ``table.region``, smoothed; a cable plugged at both ends is given a lateral wave
-whose amplitude makes the path exactly as long as the cable.  A path that crosses itself (a
+whose amplitude makes the path exactly as long as the cable.  No start shape bends tighter
+than ``MIN_BEND_RADIUS`` in plan view (:func:`unkink` rounds the corners).  A path that crosses itself (a
 flex does not collide with itself) or passes within 5 cm of an earlier cable's plugged end
 (where that cable climbs from the socket's height to its own) is drawn again, and a cable
 takes a socket no earlier cable passes within 5 cm of.  Settling lets the upper cables fall onto
@@ -32,6 +33,17 @@ SOCKET_HALF = (0.025, 0.03)  # m: half-sizes of a socket box along and across it
 MAX_REDRAWS = 50  # path draws before the least flawed one is taken
 SOCKET_CLEARANCE = 0.05  # m kept between a path and another cable's plugged end
 MAT_TOP = 0.0005  # m: the mat's top above the table (cablesim.episode.surface.TABLE.height)
+#: m: how far the mat's box reaches down into the table top.  A mat only 0.5 mm thick trapped a
+#: cable pressed through it (the settling cables fall onto one another): with its centre below
+#: the mat's middle, the mat pushed it down and the table up, and it jittered at 2-80 mm/s
+#: for good (table seeds 9102, 9213, 9219 and 9227 never settled).  Its top stays at MAT_TOP.
+MAT_DEPTH = 0.015
+#: m: the tightest bend of a start shape in plan view.  Smoothed random waypoints alone turned
+#: by 90-130 degrees between two neighbouring vertices on most cables (a waypoint behind a
+#: socket, a free end reversing at a spare point, a wave on a curved path); the first step's
+#: bending forces then stretched an edge by 25-45 %, and the dense-Newton rescue of those
+#: steps cost 10-25 s of CPU per scene.
+MIN_BEND_RADIUS = 0.06
 
 
 def socket_direction(table: TableConfig, connector: int) -> np.ndarray:
@@ -105,6 +117,7 @@ def place_on_table(
         path = _path(cfg, a, b, waypoints, length, phase, waves, spare)
         if path is None:
             continue
+        path = unkink(path, n, keep_end=b is not None)
         # a path that crosses itself is worse than one that passes a socket
         flaws = 2 * _crosses_itself(path) + _near(path, used)
         if best is None or flaws < best[0]:
@@ -115,6 +128,7 @@ def place_on_table(
         b = None
         path = _path(cfg, a, None, waypoints, length, phase, waves, np.tile(spare, (4, 1)))
         assert path is not None
+        path = unkink(path, n, keep_end=False)
     else:
         path = best[1]
     free_end = b is None
@@ -181,6 +195,81 @@ def _path(
     return waved(0.5 * (lo + hi))
 
 
+def turn_angles(p: np.ndarray) -> np.ndarray:
+    """The angle (rad) between each pair of neighbouring chords of polyline ``p``."""
+    d = np.diff(p, axis=0)
+    t = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    return np.arccos(np.clip((t[1:] * t[:-1]).sum(1), -1.0, 1.0))
+
+
+def unkink(path: np.ndarray, n: int, keep_end: bool, radius: float = MIN_BEND_RADIUS) -> np.ndarray:
+    """Plan-view ``path`` with no bend tighter than ``radius``, densified again (2 mm).
+
+    The path is resampled to the cable's ``n`` vertices (chord c) and described by the turn at
+    each vertex.  A turn beyond c / ``radius`` gives its excess, half each, to its neighbours
+    until none exceeds it: a corner becomes an arc with the same total turn, and the path its
+    length.  The chords on the plugged end's straight lead stay as they are.  Where
+    ``keep_end`` (plugged at both ends) those on the far lead too: the turns are then corrected, within the same bound, until the
+    path ends on it again (a planar chain's closure, by damped least squares)."""
+    length = _arc(path)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    t = np.linspace(0.0, s[-1], n)
+    p = np.stack([np.interp(t, s, path[:, k]) for k in range(2)], 1)
+    chord = length / (n - 1)
+    limit = chord / radius
+    # chords 0..lead-1 lie on the straight lead (within floating-point rounding)
+    lead = min(max(1, int(math.floor(LEAD / chord + 1e-6))), (n - 1) // 2)
+    d = np.diff(p, axis=0)
+    heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    turn = np.diff(heading)  # turn[i]: at vertex i + 1, between chords i and i + 1
+    lo = lead - 1  # the first turn that may change: where the lead ends
+    hi = len(turn) - lead + 1 if keep_end else len(turn)  # exclusive: the far lead's start
+    if hi - lo < 3:
+        return _resample2(p, 0.002)
+    turn[lo:hi] = _spread(turn[lo:hi], limit, keep_end)
+
+    def chain(turns: np.ndarray) -> np.ndarray:
+        h = np.concatenate([[heading[0]], heading[0] + np.cumsum(turns)])
+        steps = chord * np.column_stack([np.cos(h), np.sin(h)])
+        return np.vstack([p[:1], p[0] + np.cumsum(steps, 0)])
+
+    q = chain(turn)
+    if keep_end:
+        total = float(turn.sum())  # the far lead's heading
+        for _ in range(100):
+            err = np.array([*(p[-1] - q[-1]), total - turn.sum()])
+            if np.abs(err).max() < 1e-7:
+                break
+            r = q[-1] - q[lo + 1 : hi + 1]  # turning at vertex i + 1 swings the end about it
+            jac = np.vstack([-r[:, 1], r[:, 0], np.ones(hi - lo)])
+            step = jac.T @ np.linalg.solve(jac @ jac.T + 1e-9 * np.eye(3), err)
+            step *= min(1.0, 0.2 / max(np.abs(step).max(), 1e-12))
+            turn[lo:hi] = np.clip(turn[lo:hi] + step, -limit, limit)
+            q = chain(turn)
+        q[-1] = p[-1]  # exactly in the socket (the closure is within 0.1 um or so)
+    return _resample2(q, 0.002)
+
+
+def _spread(turn: np.ndarray, limit: float, keep_end: bool) -> np.ndarray:
+    """:func:`unkink`'s corner rounding: each turn beyond ``limit`` passes its excess, half
+    each, to its neighbours until none exceeds it (the sum stays the same)."""
+    seg = turn.copy()
+    for _ in range(500):
+        excess = np.sign(seg) * np.maximum(np.abs(seg) - limit, 0.0)
+        if not excess.any():
+            break
+        seg -= excess
+        half = 0.5 * excess
+        seg[1:] += half[:-1]  # to the next vertex
+        seg[:-1] += half[1:]  # to the previous one
+        seg[1] += half[0]  # the ends of the range pass their share inwards
+        if keep_end:
+            seg[-2] += half[-1]
+        else:  # a free end's last turn may keep its share: the cable just ends there
+            seg[-1] += half[-1]
+    return seg
+
+
 def _lift(
     path: np.ndarray, length: float, n: int, z_socket: float, z: float, both: bool
 ) -> np.ndarray:
@@ -202,13 +291,13 @@ def _lift(
     return _even_chords(out, length, both)
 
 
-def _even_chords(p: np.ndarray, length: float, both: bool) -> np.ndarray:
+def _even_chords(p: np.ndarray, length: float, both: bool, iterations: int = 300) -> np.ndarray:
     """``p`` nudged to chords of ``length / (n - 1)`` (position-based projection), the first
     end held, and the last where ``both``."""
     out = p.copy()
     chord = length / (len(p) - 1)
     first, last = p[0].copy(), p[-1].copy()
-    for _ in range(300):
+    for _ in range(iterations):
         d = np.diff(out, axis=0)
         size = np.linalg.norm(d, axis=1, keepdims=True)
         corr = 0.5 * (1 - chord / np.maximum(size, 1e-12)) * d

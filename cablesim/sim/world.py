@@ -45,7 +45,14 @@ from cablesim.sim.layout import (
     start_shape,
 )
 from cablesim.sim.settle import settle_world
-from cablesim.sim.table import MAT_TOP, PLUG_LENGTH, SOCKET_HALF, socket_direction, socket_point
+from cablesim.sim.table import (
+    MAT_DEPTH,
+    MAT_TOP,
+    PLUG_LENGTH,
+    SOCKET_HALF,
+    socket_direction,
+    socket_point,
+)
 
 CAMERA_NAME = "rgbd"
 _WARNINGS = (
@@ -199,7 +206,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
 <mujoco model="cablesim_task_board">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{cfg.physics.timestep!r}" integrator="discrete" gravity="0 0 {cfg.physics.gravity}"
-          cone="elliptic" impratio="10" solver="{cfg.physics.solver}"{_sleep_xml(cfg.physics)}
+          cone="elliptic" impratio="{cfg.impratio()!r}" solver="{cfg.physics.solver}"{_sleep_xml(cfg.physics)}
   <size memory="64M"/>
   <visual>
     <global offwidth="{max(1280, cfg.camera.width)}" offheight="{max(720, cfg.camera.height)}"/>
@@ -302,7 +309,8 @@ def _table_xml(cfg: SceneConfig, hoses: list) -> tuple[str, str]:
     mat += '<material name="socket" rgba="0.12 0.12 0.13 1" specular="0.2"/>'
     geoms = [
         f'<geom name="mat" type="box" size="{(x1 - x0) / 2 + m:.6g} {(y1 - y0) / 2 + m:.6g} '
-        f'{MAT_TOP / 2}" pos="{(x0 + x1) / 2:.6g} {(y0 + y1) / 2:.6g} {MAT_TOP / 2}" '
+        f'{(MAT_TOP + MAT_DEPTH) / 2:.6g}" pos="{(x0 + x1) / 2:.6g} {(y0 + y1) / 2:.6g} '
+        f'{(MAT_TOP - MAT_DEPTH) / 2:.6g}" '
         'material="mat" friction="0.8"/>'
     ]
     hz = (t.socket_height + 0.012) / 2  # the socket box reaches 12 mm above a plug's centre

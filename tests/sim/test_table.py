@@ -15,9 +15,15 @@ from cablesim.dataset.randomize import Randomization, randomize_scene
 from cablesim.episode import primitives as prim
 from cablesim.episode.surface import BOARD, FINGERTIP_REACH, TABLE
 from cablesim.errors import ConfigError
-from cablesim.sim.config import SURFACE_VIEWS, EpisodeConfig, HoseConfig, SceneConfig
+from cablesim.sim.config import (
+    SURFACE_IMPRATIO,
+    SURFACE_VIEWS,
+    EpisodeConfig,
+    HoseConfig,
+    SceneConfig,
+)
 from cablesim.sim.layout import sample_hoses, start_shape
-from cablesim.sim.table import MAT_TOP, socket_point
+from cablesim.sim.table import LEAD, MAT_TOP, MIN_BEND_RADIUS, socket_point, turn_angles, unkink
 
 
 def table(seed: int = 1, **values) -> SceneConfig:
@@ -75,6 +81,58 @@ def test_start_shapes_lie_apart_on_the_table_with_their_lengths_and_sockets(kind
     assert plugged_far > 0 and free_far > 0  # some far ends plugged, some free
 
 
+def _u_turn() -> np.ndarray:
+    """A plan-view path that leaves its socket along +x for 6 cm, then turns straight back
+    through a corner (the kind of path smoothed random waypoints gave)."""
+    corners = [(0.0, 0.0), (LEAD, 0.0), (0.1, 0.0), (-0.2, 0.01), (-0.2, 0.25), (0.1, 0.3)]
+    out = []
+    for a, b in zip(corners[:-1], corners[1:], strict=True):
+        t = np.linspace(0.0, 1.0, 200, endpoint=False)[:, None]
+        out.append(np.asarray(a) + t * (np.subtract(b, a)))
+    return np.vstack([*out, [corners[-1]]])
+
+
+@pytest.mark.parametrize("both", [False, True])
+def test_unkink_rounds_every_corner_and_keeps_the_length_and_the_leads(both: bool) -> None:
+    path = _u_turn()
+    length, n = _arc(path), 40
+    chord = length / (n - 1)
+    limit = chord / MIN_BEND_RADIUS
+
+    def at_vertices(p: np.ndarray) -> np.ndarray:
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+        t = np.linspace(0.0, s[-1], n)
+        return np.stack([np.interp(t, s, p[:, k]) for k in range(2)], 1)
+
+    assert turn_angles(at_vertices(path)).max() > 2.5  # corners of about 180 degrees
+    out = unkink(path, n, keep_end=both)
+    v = at_vertices(out)
+    assert _arc(out) == pytest.approx(length, rel=0.01)
+    assert turn_angles(v).max() < 1.15 * limit  # no bend tighter than MIN_BEND_RADIUS
+    # the chords on the lead (6 cm straight out of the socket along +x) stay on it
+    head = out[: int(math.floor(LEAD / chord) * chord / 0.002)]
+    assert np.allclose(out[0], path[0]) and np.abs(head[:, 1]).max() < 1e-9
+    if both:  # plugged at both ends: the far end stays in its socket
+        assert np.allclose(out[-1], path[-1], atol=1e-6)
+
+
+def test_start_shapes_on_the_table_bend_like_cables_not_like_hinges() -> None:
+    """Over 20 scenes, a cable's start shape turns by at most 1.15 chord / MIN_BEND_RADIUS
+    between neighbouring vertices in plan view (free ends), and the plugged-at-both-ends ones
+    mostly so: smoothed random waypoints alone gave 90-130 degree corners on most cables, which
+    stretched edges by 25-45 % in the first step."""
+    free, both = [], []
+    for seed in range(20):
+        cfg = table(seed)
+        for s in sample_hoses(cfg):
+            p = start_shape(cfg, s)[:, :2]
+            chord = s.length / (s.n_vertices - 1)
+            worst = turn_angles(p[1:]).max() / (chord / MIN_BEND_RADIUS)  # past the socket
+            (both if s.both_ends else free).append(worst)
+    assert len(free) > 10 and len(both) > 10
+    assert np.median(free) < 1.15 and np.median(both) < 2.0, (np.median(free), np.median(both))
+
+
 def test_the_table_layout_is_the_seeds_alone() -> None:
     a = [start_shape(table(5), s) for s in sample_hoses(table(5))]
     b = [start_shape(table(5), s) for s in sample_hoses(table(5))]
@@ -84,6 +142,18 @@ def test_the_table_layout_is_the_seeds_alone() -> None:
 
 
 # ---------------------------------------------------------------------- config
+def test_the_table_holds_its_cables_with_stiffer_friction() -> None:
+    from cablesim.sim.world import World
+
+    assert table().impratio() == SURFACE_IMPRATIO["table"] == 100.0
+    assert SceneConfig().impratio() == SURFACE_IMPRATIO["board"] == 10.0
+    assert table(**{"physics.impratio": 30}).impratio() == 30.0
+    with pytest.raises(ConfigError, match=r"physics\.impratio.*0\.5"):
+        table(**{"physics.impratio": 0.5})
+    w = World.build(table(3, **{"hoses.count": 2}), settle=False)
+    assert w.model.opt.impratio == 100.0
+
+
 def test_the_surface_is_a_checked_field_with_its_own_camera_view() -> None:
     assert SceneConfig().surface == "board" and SceneConfig().view() == SURFACE_VIEWS["board"]
     assert table().view() == SURFACE_VIEWS["table"]
@@ -179,6 +249,14 @@ def test_the_table_scene_settles_with_its_cables_lying_on_the_mat(table_world) -
     with SimCamera(w) as cam:
         labels = cam.render_labels()
     assert not (labels == -2).any()  # the parked arm is out of the table camera's view
+    # settled means still: MuJoCo's soft friction let cables plugged at both ends creep over
+    # the mat at 1-5 mm/s at impratio 10; two seconds more move no vertex by a millimetre
+    state = w.get_state()
+    before = w.all_hose_vertices().copy()
+    w.step(int(2.0 / w.model.opt.timestep))
+    moved = np.linalg.norm(w.all_hose_vertices() - before, axis=1).max()
+    w.set_state(state)
+    assert moved < 0.001, moved
     assert set(np.unique(labels)) >= {0, 1, 2}  # every cable in view
 
 
