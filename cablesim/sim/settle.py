@@ -73,8 +73,11 @@ def cache_dir() -> Path:
 
 # the modules whose code decides the settled state: a change to any of them makes a new key
 _PHYSICS_SOURCES = (
+    "cables.py",  # the kinds' radius, stiffness, mass, friction, damping
     "sim/config.py",
     "sim/layout.py",
+    "sim/table.py",  # the table's start shapes, sockets and mat
+    "sim/hand_board.py",
     "sim/world.py",
     "sim/settle.py",
     "panda/model.py",

@@ -10,11 +10,11 @@ centimetres to its own height (cable ``rank`` r lies at ``radius + 2 mm + r (2.2
 above the table, so that no two start shapes touch) and wanders through two to four points
 drawn in ``table.region``, smoothed; a cable plugged at both ends is given a lateral wave
 whose amplitude makes the path exactly as long as the cable.  No start shape bends tighter
-than ``MIN_BEND_RADIUS`` in plan view (:func:`unkink` rounds the corners).  A path that crosses itself (a
-flex does not collide with itself) or passes within 5 cm of an earlier cable's plugged end
-(where that cable climbs from the socket's height to its own) is drawn again, and a cable
-takes a socket no earlier cable passes within 5 cm of.  Settling lets the upper cables fall onto
-the lower ones: the crossings of the settled scene are real contacts.
+than ``MIN_BEND_RADIUS`` in plan view (:func:`unkink` rounds the corners).  A path that
+crosses itself (a flex does not collide with itself) or passes within 5 cm of an earlier
+cable's plugged end (where that cable climbs from the socket's height to its own) is drawn
+again, and a cable takes a socket no earlier cable passes within 5 cm of.  Settling lets the
+upper cables fall onto the lower ones: the crossings of the settled scene are real contacts.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ MAT_DEPTH = 0.015
 #: by 90-130 degrees between two neighbouring vertices on most cables (a waypoint behind a
 #: socket, a free end reversing at a spare point, a wave on a curved path); the first step's
 #: bending forces then stretched an edge by 25-45 %, and the dense-Newton rescue of those
-#: steps cost 10-25 s of CPU per scene.
+#: steps cost 8-28 s of CPU per scene.
 MIN_BEND_RADIUS = 0.06
 
 
@@ -209,8 +209,9 @@ def unkink(path: np.ndarray, n: int, keep_end: bool, radius: float = MIN_BEND_RA
     each vertex.  A turn beyond c / ``radius`` gives its excess, half each, to its neighbours
     until none exceeds it: a corner becomes an arc with the same total turn, and the path its
     length.  The chords on the plugged end's straight lead stay as they are.  Where
-    ``keep_end`` (plugged at both ends) those on the far lead too: the turns are then corrected, within the same bound, until the
-    path ends on it again (a planar chain's closure, by damped least squares)."""
+    ``keep_end`` (plugged at both ends) those on the far lead too: the turns are then
+    corrected, within the same bound, until the path ends on it again (a planar chain's
+    closure, by damped least squares)."""
     length = _arc(path)
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
     t = np.linspace(0.0, s[-1], n)
