@@ -174,7 +174,7 @@ def _path(
     base = _arc(fine)
     if base > length:
         return None
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(fine, axis=0), axis=1))])
+    s = _arc_positions(fine)
     tangent = np.gradient(fine, axis=0)
     tangent /= np.maximum(np.linalg.norm(tangent, axis=1, keepdims=True), 1e-12)
     normal = np.stack([-tangent[:, 1], tangent[:, 0]], 1)
@@ -213,9 +213,7 @@ def unkink(path: np.ndarray, n: int, keep_end: bool, radius: float = MIN_BEND_RA
     corrected, within the same bound, until the path ends on it again (a planar chain's
     closure, by damped least squares)."""
     length = _arc(path)
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
-    t = np.linspace(0.0, s[-1], n)
-    p = np.stack([np.interp(t, s, path[:, k]) for k in range(2)], 1)
+    p = _resample_count(path, n)
     chord = length / (n - 1)
     limit = chord / radius
     # chords 0..lead-1 lie on the straight lead (within floating-point rounding)
@@ -276,7 +274,7 @@ def _lift(
 ) -> np.ndarray:
     """The 3D start shape: ``n`` vertices along ``path`` at height ``z``, climbing from the
     socket's height within ``CLIMB`` of each plugged end; chords of (nearly) length/(n-1)."""
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+    s = _arc_positions(path)
     u = np.clip(s / CLIMB, 0.0, 1.0)
     ramp = u * u * (3 - 2 * u)
     if both:
@@ -285,11 +283,7 @@ def _lift(
     heights = z_socket + (z - z_socket) * ramp
     pts = np.column_stack([path, heights])
     # resample by 3D arc length to n vertices, then even out the chords (both ends fixed)
-    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-    c = np.concatenate([[0.0], np.cumsum(seg)])
-    t = np.linspace(0, c[-1], n)
-    out = np.stack([np.interp(t, c, pts[:, k]) for k in range(3)], 1)
-    return _even_chords(out, length, both)
+    return _even_chords(_resample_count(pts, n), length, both)
 
 
 def _even_chords(p: np.ndarray, length: float, both: bool, iterations: int = 300) -> np.ndarray:
@@ -329,14 +323,24 @@ def _arc(p: np.ndarray) -> float:
 
 
 def _resample2(p: np.ndarray, step: float) -> np.ndarray:
-    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    t = np.linspace(0, s[-1], max(2, int(math.ceil(s[-1] / step)) + 1))
+    """Polyline ``p`` resampled evenly by arc length, at most ``step`` apart."""
+    s = _arc_positions(p)
+    return _at_arc(p, s, np.linspace(0.0, s[-1], max(2, int(math.ceil(s[-1] / step)) + 1)))
+
+
+def _resample_count(p: np.ndarray, n: int) -> np.ndarray:
+    """Polyline ``p`` resampled to ``n`` points evenly spaced by arc length (ends kept)."""
+    s = _arc_positions(p)
+    return _at_arc(p, s, np.linspace(0.0, s[-1], n))
+
+
+def _at_arc(p: np.ndarray, s: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The points of polyline ``p`` (arc positions ``s``) at arc positions ``t``."""
     return np.stack([np.interp(t, s, p[:, k]) for k in range(p.shape[1])], 1)
 
 
 def _cut(p: np.ndarray, length: float) -> np.ndarray:
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
+    s = _arc_positions(p)
     keep = s < length
     end = np.array([np.interp(length, s, p[:, k]) for k in range(p.shape[1])])
     return np.vstack([p[keep], end])
