@@ -70,3 +70,23 @@ def test_the_realistic_flow_summary_leaves_out_the_raw_numbers() -> None:
         "results": {"x": {"test": {"0.4": {"all": {"f": 0.1235}}}}},
     }
     assert summary_path(Path("r/realistic_flow.md")) == Path("r/realistic_flow.summary.json")
+
+
+def test_realistic_flow_scenes_of_another_kind_or_surface_are_recorded_apart() -> None:
+    from benchmarks.experiments.realistic_flow.record import Scene
+    from cablesim.sim.config import SceneConfig
+
+    # the default hose on the board keeps the names (and recordings) it always had
+    hose = Scene("val", 301, "wood")
+    assert hose.name == "val-301-wood-default"
+    assert hose.config().scene == SceneConfig(seed=301)
+    wire = Scene("test", 905, "solid", "default", "thin_wire", "table")
+    assert wire.name == "test-905-solid-default-table-thin_wire"
+    assert wire.path != Scene("test", 905, "solid").path
+    scene = wire.config().scene
+    assert (scene.surface, scene.hoses.kind, scene.table.background) == (
+        "table",
+        "thin_wire",
+        "solid",
+    )
+    assert scene.seed == 905

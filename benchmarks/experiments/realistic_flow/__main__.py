@@ -45,7 +45,15 @@ from benchmarks.experiments.realistic_flow.evaluate import (
     union_mask,
     validation_scores,
 )
-from benchmarks.experiments.realistic_flow.record import GEOMETRIES, Scene, record, recorded
+from benchmarks.experiments.realistic_flow.record import (
+    DEFAULT_CABLE,
+    DEFAULT_SURFACE,
+    GEOMETRIES,
+    Scene,
+    record,
+    recorded,
+    suffix,
+)
 from cablesim import provenance as pv
 
 # scene counts: what a shared 2-core machine allowed (one interaction ~45 s CPU to simulate)
@@ -93,8 +101,33 @@ ORACLE = ("oracle", "raw", "none")
 METHODS = ("correlation", "segmentation", "ablation")
 
 
-def _scenes(split: str, geometry: str = "default") -> tuple[list[Scene], list[Scene]]:
-    return recorded(split, "wood", geometry), recorded(split, "solid", geometry)
+def _scenes(
+    split: str,
+    geometry: str = "default",
+    cable: str = DEFAULT_CABLE,
+    surface: str = DEFAULT_SURFACE,
+) -> tuple[list[Scene], list[Scene]]:
+    return (
+        recorded(split, "wood", geometry, cable, surface),
+        recorded(split, "solid", geometry, cable, surface),
+    )
+
+
+def _add_kind_args(p: argparse.ArgumentParser) -> None:
+    from cablesim.cables import CABLE_KINDS
+
+    p.add_argument(
+        "--cable",
+        choices=sorted(CABLE_KINDS),
+        default=DEFAULT_CABLE,
+        help="the kind of every cable (default: the garden hose)",
+    )
+    p.add_argument(
+        "--scene",
+        choices=("board", "table"),
+        default=DEFAULT_SURFACE,
+        help="board (default) or table (the mat takes the wood / solid looks)",
+    )
 
 
 def _stats(scene: Scene, noisy: bool, combo: tuple):
@@ -232,6 +265,7 @@ def main() -> None:
     r.add_argument("--split", choices=("val", "test", "both"), default="both")
     r.add_argument("--geometry", choices=GEOMETRIES, default="default")
     r.add_argument("--scale", type=float, default=1.0, help="fraction of the scene counts")
+    _add_kind_args(r)
     e = sub.add_parser("evaluate")
     e.add_argument("--skip-explore", action="store_true")
     e.add_argument("--skip-proposals", action="store_true")
@@ -253,7 +287,14 @@ def main() -> None:
         help="the configuration reported as 'after' (default: the chosen defaults, "
         f"{'/'.join(AFTER)}); e.g. another setting's validation winner",
     )
-    e.add_argument("--out", type=Path, default=RESULTS / "realistic_flow.md")
+    _add_kind_args(e)
+    e.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="the report (default: results/realistic_flow.md, or realistic_flow_SCENE_CABLE.md "
+        "for another kind or scene)",
+    )
     args = ap.parse_args()
 
     def log(m: str) -> None:
@@ -267,7 +308,15 @@ def main() -> None:
         if args.split in ("test", "both"):
             splits["test"] = (TEST_SEEDS, max(1, round(TEST_WANT * args.scale)))
             solid["test"] = round(TEST_SOLID * args.scale)
-        out = record(splits, solid, args.workers, args.geometry, log=log)
+        out = record(
+            splits,
+            solid,
+            args.workers,
+            args.geometry,
+            log=log,
+            cable=args.cable,
+            surface=args.scene,
+        )
         for k, v in out.items():
             log(f"{k}: {len(v)} scenes, seeds {[s.seed for s in v]}")
         return
@@ -281,13 +330,24 @@ def main() -> None:
     colour = (*after, COLOUR[3])
     t_start = time.time()
     load0 = os.getloadavg()
-    vw, vs = _scenes("val", args.geometry)
-    tw, ts = _scenes("test", args.geometry)
+    if args.out is None:
+        tail = suffix(args.cable, args.scene).replace("-", "_")
+        args.out = RESULTS / f"realistic_flow{tail}.md"
+    vw, vs = _scenes("val", args.geometry, args.cable, args.scene)
+    tw, ts = _scenes("test", args.geometry, args.cable, args.scene)
+    if not (vw or vs) or not (tw or ts):
+        ap.error(
+            f"no recorded scenes for --cable {args.cable} --scene {args.scene} --geometry "
+            f"{args.geometry} in {Scene('val', 0, 'wood').path.parent} (validation "
+            f"{len(vw) + len(vs)}, test {len(tw) + len(ts)}): run `record` with the same options"
+        )
     val, test = vw + vs, tw + ts
     log(f"validation: {len(vw)} wood + {len(vs)} solid; test: {len(tw)} wood + {len(ts)} solid")
     report: dict[str, Any] = {
         **pv.provenance(),
         "geometry": args.geometry,
+        "cable": args.cable,
+        "surface": args.scene,
         "scenes": {
             "val_wood": [s.seed for s in vw],
             "val_solid": [s.seed for s in vs],

@@ -31,6 +31,9 @@ TAG = "rf1"
 #: 1280x720) and "fast" (320x240 and 2 periods per action: the setting that brings one
 #: interaction near issue 9's 12 s here, benchmarks/results/episode_variants.md)
 GEOMETRIES = ("default", "thesis", "fast")
+#: what the cables are and what holds them (issue 22): a scene of the default hose on the board
+#: keeps its old name (and its recordings); any other kind or surface is named after them
+DEFAULT_CABLE, DEFAULT_SURFACE = "garden_hose", "board"
 
 
 @dataclass(frozen=True)
@@ -39,10 +42,12 @@ class Scene:
     seed: int
     board: str  # "wood" | "solid"
     geometry: str = "default"  # a key of GEOMETRIES
+    cable: str = DEFAULT_CABLE  # a kind of cablesim.cables.CABLE_KINDS, for every cable
+    surface: str = DEFAULT_SURFACE  # "board" | "table"; on the table ``board`` is the mat's look
 
     @property
     def name(self) -> str:
-        return f"{self.split}-{self.seed}-{self.board}-{self.geometry}"
+        return f"{self.split}-{self.seed}-{self.board}-{self.geometry}{suffix(self.cable, self.surface)}"
 
     @property
     def path(self) -> Path:
@@ -84,13 +89,24 @@ class Scene:
         elif self.geometry == "fast":
             camera = CameraConfig(width=320, height=240)
             actions = ActionConfig(periods=2)
+        scene = SceneConfig(
+            seed=self.seed, board=BoardConfig(background=self.board), camera=camera
+        ).with_values({"surface": self.surface, "hoses.kind": self.cable})
+        if self.surface == "table":
+            scene = scene.with_values({"table.background": self.board})
         return EpisodeConfig(
-            scene=SceneConfig(
-                seed=self.seed, board=BoardConfig(background=self.board), camera=camera
-            ),
+            scene=scene,
             interaction=InteractionConfig(actions=actions, capture=CaptureConfig(arm_masks=True)),
             perturb=PerturbConfig(enabled=True),
         )
+
+
+def suffix(cable: str = DEFAULT_CABLE, surface: str = DEFAULT_SURFACE) -> str:
+    """What a scene's name ends with for ``cable`` on ``surface`` ("" for the default hose on
+    the board)."""
+    if (cable, surface) == (DEFAULT_CABLE, DEFAULT_SURFACE):
+        return ""
+    return f"-{surface}-{cable}"
 
 
 def slipped(doc: dict) -> bool:
@@ -126,7 +142,9 @@ def record_scene(scene: Scene) -> tuple[Scene, str, float]:
     return scene, scene.status(), time.process_time() - t0
 
 
-def _record_split(pool, split: str, seeds: Iterable[int], want: int, geometry: str, log) -> list:
+def _record_split(
+    pool, split: str, seeds: Iterable[int], want: int, geometry: str, log, cable: str, surface: str
+) -> list:
     """Wood-board scenes of ``split`` from ``seeds`` (in order) until ``want`` succeeded."""
     ok: list[Scene] = []
     pending: dict[Future, Scene] = {}
@@ -134,7 +152,7 @@ def _record_split(pool, split: str, seeds: Iterable[int], want: int, geometry: s
 
     def submit_next() -> bool:
         for seed in it:
-            sc = Scene(split, seed, "wood", geometry)
+            sc = Scene(split, seed, "wood", geometry, cable, surface)
             st = sc.status()
             if st == "ok":
                 ok.append(sc)
@@ -169,6 +187,8 @@ def record(
     workers: int = 2,
     geometry: str = "default",
     log=print,
+    cable: str = DEFAULT_CABLE,
+    surface: str = DEFAULT_SURFACE,
 ) -> dict[str, list[Scene]]:
     """Record, per split, scenes from its seed range until ``want`` succeeded on the wood board;
     then the first ``solid[split]`` of those again on the solid board.  Returns the recorded
@@ -176,9 +196,12 @@ def record(
     out: dict[str, list[Scene]] = {}
     with ProcessPoolExecutor(max_workers=workers) as pool:
         for split, (seeds, want) in splits.items():
-            ok = _record_split(pool, split, seeds, want, geometry, log)
+            ok = _record_split(pool, split, seeds, want, geometry, log, cable, surface)
             out[f"{split}/wood"] = ok
-            sol = [Scene(split, s.seed, "solid", geometry) for s in ok[: solid.get(split, 0)]]
+            sol = [
+                Scene(split, s.seed, "solid", geometry, cable, surface)
+                for s in ok[: solid.get(split, 0)]
+            ]
             futs = {pool.submit(record_scene, s): s for s in sol if s.status() == "todo"}
             for fut in futs:
                 _, st, secs = fut.result()
@@ -187,13 +210,19 @@ def record(
     return out
 
 
-def recorded(split: str, board: str, geometry: str = "default") -> list[Scene]:
+def recorded(
+    split: str,
+    board: str,
+    geometry: str = "default",
+    cable: str = DEFAULT_CABLE,
+    surface: str = DEFAULT_SURFACE,
+) -> list[Scene]:
     """The scenes of ``split`` recorded so far (ok), in seed order."""
     root = CACHE / TAG
     out = []
-    for p in sorted(root.glob(f"{split}-*-{board}-{geometry}")):
+    for p in sorted(root.glob(f"{split}-*-{board}-{geometry}{suffix(cable, surface)}")):
         if p.is_dir():
-            sc = Scene(split, int(p.name.split("-")[1]), board, geometry)
+            sc = Scene(split, int(p.name.split("-")[1]), board, geometry, cable, surface)
             if sc.status() == "ok":
                 out.append(sc)
     return sorted(out, key=lambda s: s.seed)
