@@ -58,19 +58,19 @@ PINNED: dict[str, dict[str, str]] = {
         "frames": "1a1718fdce1999e679160b62c3bc964adfdde7c0e5bdd773443dde234acf0cf4",
         "votes": "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855",
         "metrics": "d0e8d1c0abb3cace07fd2b65caed99a436337c582a083924ff7cd628512b7fe8",
-        "config": "c935ebf3f447d73085fda24d5ca951e6d727997d0eb44adb9adc2309d781e937",
+        "config": "dd6d0aac14b7127d8071399ffac7b3d36ea2b983dc50313bf548a52d1c2f40ea",
     },
     "seed2_push": {
         "frames": "36cd86b80c7be2972f0dabcf0202d34ff1e39b0af54d007a6baf9004effea2cd",
         "votes": "9ee0422f9125056469345b356a27ffe32236a59c69fc48ae57b0435c11e89848",
         "metrics": "137c7d618691d8f9e64732ae31bf2151c45ac42bd0690348579638f00cda5611",
-        "config": "82b4012c7f4bdb1aaf9dfd707084df76e1d21cd609600d6dee81b0091326d928",
+        "config": "8342449dbb5c00d1defc45e38e9149a4e9561f7da411d425b9b2b93b6dd0a541",
     },
     "seed3_sampler": {
         "frames": "f015d5dd15fa9317700e264df30c310dbe8fcb93b83153bc977ff1a714245049",
         "votes": "57d3123b5e884cb57e5f9ef4e466fedb3804faa17bc884b81a0864cfb8be1abc",
         "metrics": "630d16db8c50c8be12a1fa8051a1adf5fef0f0b3d82c25e3aec5e94352409232",
-        "config": "ff9dcb8a881d2eca2cf6ba4f69c856f158a1c06841049b2b1da66346a2293255",
+        "config": "443aed521ac26f3e07a0ffd86d55a85dc766ce69c062f4de15b06ab30f503294",
     },
 }
 DEMO_ARGS = ["--seed", "0"]  # the README's demo: cablesim explore --seed 0 --out runs/demo

@@ -404,6 +404,7 @@ class World:
         self._jacobian = int(model.opt.jacobian)
         self._rescue_steps = 0
         self._rescues = 0
+        self._rescue_release = cfg.rescue_release()  # ends a rescue early (0: never)
         self._step_state = np.empty(mujoco.mj_stateSize(model, _STATE))
         self.before_step: list[StepHook] = []
         self.after_step: list[StepHook] = []
@@ -525,7 +526,9 @@ class World:
         than that (a taut hose held by the arm, where CG at its iteration cap and the sparse
         Newton both stop short of the solution and the hose can run away), the step is redone
         with Newton on a dense Jacobian, which converges in a few iterations there, and the
-        dense Newton goes on for ``physics.rescue_time`` (16 ms per step instead of ~2)."""
+        dense Newton goes on for ``physics.rescue_time`` (16 ms per step instead of ~2), or
+        until a dense step leaves every edge stretched by less than the resolved
+        ``physics.rescue_release`` (the table's 0.1; the board runs the whole rescue)."""
         m, d = self.model, self.data
         if self._rescue_steps == 0:
             rescue = self.cfg.physics.rescue_strain > 0 and len(self._edge_length0) > 0
@@ -545,6 +548,9 @@ class World:
             self._rescue_steps = max(1, round(self.cfg.physics.rescue_time / m.opt.timestep))
         mujoco.mj_step(m, d)
         self._rescue_steps -= 1
+        release = self._rescue_release
+        if release > 0 and self._rescue_steps > 0 and self.hose_stretch().max() < release:
+            self._rescue_steps = 0
         if self._rescue_steps == 0:
             m.opt.solver, m.opt.jacobian = self._solver, self._jacobian
         return None
