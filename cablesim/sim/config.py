@@ -56,8 +56,9 @@ SURFACE_VIEWS: Mapping[str, tuple[tuple[float, float, float], tuple[float, float
 #: a cable squirted out from under the grasped one or from beside a finger, an edge stretched
 #: 20-60 % in one step, and the grasp was lost (seeds 9700-9705 with the rescue release: 1 of
 #: 6 interactions held at 100; at 30, 4 of the 4 tried, 9700, 9702, 9704 and 9705; at 30
-#: without the release 5 of 6, 9700 and 9702-9706).  30 is the compromise: scenes still settle (29 of 30, seeds 9200-9229,
-#: median 2.0 s CPU), and a cable still creeps, slower than the settle threshold (1 mm/s).
+#: without the release 5 of 6, 9700 and 9702-9706).  30 is the compromise: scenes still
+#: settle (29 of 30, seeds 9200-9229, median 2.0 s CPU), and a cable still creeps, slower
+#: than the settle threshold (1 mm/s).
 SURFACE_IMPRATIO: Mapping[str, float] = {"board": 10.0, "table": 30.0}
 #: Each surface's ``physics.rescue_release``, where it is None.  The table's dense-Newton
 #: rescue steps are 8x the board's (118-174 ms: about 1 800 degrees of freedom in contact with
