@@ -115,6 +115,7 @@ def _scenes(
 
 def _add_kind_args(p: argparse.ArgumentParser) -> None:
     from cablesim.cables import CABLE_KINDS
+    from cablesim.sim.config import SURFACES
 
     p.add_argument(
         "--cable",
@@ -124,7 +125,7 @@ def _add_kind_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--scene",
-        choices=("board", "table"),
+        choices=SURFACES,
         default=DEFAULT_SURFACE,
         help="board (default) or table (the mat takes the wood / solid looks)",
     )

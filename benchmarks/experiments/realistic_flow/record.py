@@ -22,6 +22,8 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from dataclasses import dataclass
 from pathlib import Path
 
+from cablesim.cables import DEFAULT_KIND
+
 CACHE = Path(os.environ.get("CABLESIM_STREAMS", Path.home() / ".cache" / "cablesim" / "streams"))
 #: bump when the recorded interaction changes (a new tag records into a new folder)
 TAG = "rf1"
@@ -33,7 +35,7 @@ TAG = "rf1"
 GEOMETRIES = ("default", "thesis", "fast")
 #: what the cables are and what holds them (issue 22): a scene of the default hose on the board
 #: keeps its old name (and its recordings); any other kind or surface is named after them
-DEFAULT_CABLE, DEFAULT_SURFACE = "garden_hose", "board"
+DEFAULT_CABLE, DEFAULT_SURFACE = DEFAULT_KIND, "board"
 
 
 @dataclass(frozen=True)
@@ -74,7 +76,6 @@ class Scene:
     def config(self):
         from cablesim.episode.config import ActionConfig, CaptureConfig, InteractionConfig
         from cablesim.sim.config import (
-            BoardConfig,
             CameraConfig,
             EpisodeConfig,
             PerturbConfig,
@@ -89,11 +90,13 @@ class Scene:
         elif self.geometry == "fast":
             camera = CameraConfig(width=320, height=240)
             actions = ActionConfig(periods=2)
-        scene = SceneConfig(
-            seed=self.seed, board=BoardConfig(background=self.board), camera=camera
-        ).with_values({"surface": self.surface, "hoses.kind": self.cable})
+        # the wood / solid look: the board's, and on the table the mat's too
+        looks = {"board.background": self.board}
         if self.surface == "table":
-            scene = scene.with_values({"table.background": self.board})
+            looks["table.background"] = self.board
+        scene = SceneConfig(seed=self.seed, camera=camera).with_values(
+            {"surface": self.surface, "hoses.kind": self.cable, **looks}
+        )
         return EpisodeConfig(
             scene=scene,
             interaction=InteractionConfig(actions=actions, capture=CaptureConfig(arm_masks=True)),

@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from benchmarks.experiments.realistic_flow.record import DEFAULT_CABLE, DEFAULT_SURFACE
+
 GRADE_ORDER = ("correct_reachable", "correct_unreachable", "wrong_hose", "background")
 
 
@@ -43,15 +45,15 @@ GEOMETRY_TEXT = {
 
 
 def _what(rep: dict[str, Any]) -> str:
-    cable, surface = rep.get("cable", "garden_hose"), rep.get("surface", "board")
-    if (cable, surface) == ("garden_hose", "board"):
+    cable, surface = rep.get("cable", DEFAULT_CABLE), rep.get("surface", DEFAULT_SURFACE)
+    if (cable, surface) == (DEFAULT_CABLE, DEFAULT_SURFACE):
         return "default scene"
     where = "lying on the table" if surface == "table" else "hanging on the board"
     return f"scene of `{cable}` cables {where} (`--cable {cable} --scene {surface}`)"
 
 
 def _holder(rep: dict[str, Any]) -> str:
-    return "mat" if rep.get("surface", "board") == "table" else "board"
+    return "mat" if rep.get("surface", DEFAULT_SURFACE) == "table" else "board"
 
 
 def render(rep: dict[str, Any]) -> str:
