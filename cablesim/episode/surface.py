@@ -34,7 +34,9 @@ class Surface:
     short of an action's target); ``faces_camera``: the surface lies behind the cables along
     the camera's view, so the nearest depths of a proposed segment are the cable's (the board;
     the exploration's ``front_filter`` relies on it), not the table seen obliquely, where depth
-    runs along a lying cable."""
+    runs along a lying cable; ``needs_slack``: the cables lie on the surface, held along
+    their length by friction, so a grasp needs slack between it and each plugged end
+    (:func:`cablesim.sim.picker.slack_to_plugged_ends`)."""
 
     name: str
     approach: tuple[float, float, float]
@@ -44,6 +46,7 @@ class Surface:
     height: float | None = None
     lift: float = 0.0
     faces_camera: bool = False
+    needs_slack: bool = False
 
     def grasp_centre(self, centre: np.ndarray) -> np.ndarray:
         """``centre`` (world), raised where the fingertips would otherwise touch the surface."""
@@ -62,5 +65,6 @@ TABLE = Surface(
     in_plane=True,
     height=0.0005,
     lift=0.01,
+    needs_slack=True,
 )
 SURFACES = {s.name: s for s in (BOARD, TABLE)}

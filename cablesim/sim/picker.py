@@ -12,6 +12,12 @@ centimetres of it (connected to it), and accepts the first candidate that
   least ``min_end_distance`` along the hose from either end (near a connector the hose is
   short and taut: pulling it along its axis makes it slip through the fingers), and
   its axis is at most ``max_out_of_plane_deg`` out of the image plane (SPEC 5),
+- on a surface the cables lie on (the table, ``Surface.needs_slack``), a grasp has at least
+  the action amplitude of slack between it and each plugged end (arc length less the straight
+  distance, :func:`slack_to_plugged_ends`): friction holds a lying cable along its length,
+  so pulling a grasp with less slack away from its socket stretches the cable until it springs
+  out of the fingers (measured on the table: 6 of the 7 grasps lost in the ``along`` action of
+  seeds 9800-9899 had 0.1-1.4 cm of slack towards a socket, nearly in the pull's line),
 - leaves the gripper room: no other hose (nor a far part of the same hose) lies where the open
   fingers or the hand will be or sweep through on the straight approach
   (:func:`gripper_obstruction`; measured: a finger that lands on a neighbouring hose in front
@@ -154,6 +160,14 @@ def pick_segment(
         if d > max_axis_error:
             reasons["off the hose in 3D"] += 1
             continue
+        if (
+            surface.needs_slack
+            and cfg.kind == "grasp"
+            and min(slack_to_plugged_ends(verts, world.hoses[hose].spec.both_ends, arc))
+            < cfg.actions.amplitude
+        ):
+            reasons["too little slack to a plugged end"] += 1
+            continue
         g_centre = surface.grasp_centre(prim.grasp_centre(T, sp.centre, cfg.grasp.surface_offset))
         if gripper_obstruction(world, hose, g_centre, axis, approach, cfg, arc):
             reasons["no room for the gripper"] += 1
@@ -285,6 +299,20 @@ def gripper_obstruction(
             part = "fingers" if (fingers & hit).any() else "hand"
             return f"the {part} would touch {who}"
     return ""
+
+
+def slack_to_plugged_ends(verts: np.ndarray, both_ends: bool, arc: float) -> list[float]:
+    """The slack (m) of the rod ``verts`` between arc length ``arc`` and each plugged end:
+    the arc length between them less their straight distance.  The first end is always
+    plugged, the last one where ``both_ends``."""
+    verts = np.asarray(verts, float)
+    lengths = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(verts, axis=0), axis=1))])
+    arc = float(np.clip(arc, 0.0, lengths[-1]))
+    point = np.array([np.interp(arc, lengths, verts[:, k]) for k in range(3)])
+    out = [arc - float(np.linalg.norm(point - verts[0]))]
+    if both_ends:
+        out.append(lengths[-1] - arc - float(np.linalg.norm(verts[-1] - point)))
+    return out
 
 
 def _densify(points: np.ndarray, step: float) -> np.ndarray:

@@ -328,3 +328,37 @@ def test_a_rescue_on_the_table_ends_once_the_stretch_is_gone() -> None:
         assert w._rescue_steps == left  # the table's ends at once; 0 keeps the whole rescue
         if left == 0:
             assert (m.opt.solver, m.opt.jacobian) == (w._solver, w._jacobian)
+
+
+def test_slack_to_plugged_ends_is_arc_length_less_the_straight_distance() -> None:
+    from cablesim.sim.picker import slack_to_plugged_ends
+
+    straight = np.array([[0.0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]])
+    assert slack_to_plugged_ends(straight, True, 0.07) == pytest.approx([0.0, 0.0], abs=1e-12)
+    corner = np.array([[0.0, 0, 0], [0.1, 0, 0], [0.1, 0.1, 0]])
+    # 15 cm along: 0.15 m of rod back to the first end, straight distance hypot(0.1, 0.05);
+    # the last 5 cm to the far end are straight
+    first, last = slack_to_plugged_ends(corner, True, 0.15)
+    assert first == pytest.approx(0.15 - math.hypot(0.1, 0.05))
+    assert last == pytest.approx(0.0, abs=1e-12)
+    assert slack_to_plugged_ends(corner, False, 0.2) == pytest.approx([0.2 - math.hypot(0.1, 0.1)])
+
+
+def test_the_table_picker_leaves_the_action_amplitude_of_slack_to_each_socket() -> None:
+    """Seed 9801's first draw was a grasp 27 cm from the socket on a cable lying straight from
+    it (1 mm of slack): the ``along`` pull stretched the cable until it sprang out of the
+    fingers.  The picker now turns such a grasp down; the board (hanging hoses) has no rule."""
+    from cablesim.sim.picker import _distance_to_polyline, slack_to_plugged_ends
+    from cablesim.sim.session import SimSession
+
+    assert TABLE.needs_slack and not BOARD.needs_slack
+    cfg = EpisodeConfig(scene=table(9801))
+    session = SimSession.build(cfg)
+    try:
+        picked = session.pick_start()
+        verts = session.world.hose_vertices(picked.hose)
+        _, arc = _distance_to_polyline(picked.centre_world, verts)
+        both = session.world.hoses[picked.hose].spec.both_ends
+        assert min(slack_to_plugged_ends(verts, both, arc)) >= cfg.interaction.actions.amplitude
+    finally:
+        session.close()
