@@ -58,19 +58,19 @@ PINNED: dict[str, dict[str, str]] = {
         "frames": "1a1718fdce1999e679160b62c3bc964adfdde7c0e5bdd773443dde234acf0cf4",
         "votes": "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855",
         "metrics": "d0e8d1c0abb3cace07fd2b65caed99a436337c582a083924ff7cd628512b7fe8",
-        "config": "dd6d0aac14b7127d8071399ffac7b3d36ea2b983dc50313bf548a52d1c2f40ea",
+        "config": "50991694306131abb51555b655a7f8e5f44202657296f60aa51124165f378a65",
     },
     "seed2_push": {
-        "frames": "36cd86b80c7be2972f0dabcf0202d34ff1e39b0af54d007a6baf9004effea2cd",
-        "votes": "9ee0422f9125056469345b356a27ffe32236a59c69fc48ae57b0435c11e89848",
-        "metrics": "137c7d618691d8f9e64732ae31bf2151c45ac42bd0690348579638f00cda5611",
-        "config": "8342449dbb5c00d1defc45e38e9149a4e9561f7da411d425b9b2b93b6dd0a541",
+        "frames": "196396d7586577f4d37280aff823c65f13334822fb4044ab4c256350bdf8d57f",
+        "votes": "3a007d1793b71f27692bf3b09b58970f027ecb5b34fed602d4b402f8d39f129c",
+        "metrics": "aea9968fbab07bb87a469354298b1651d1d577f90ac6f5611df5138486661e93",
+        "config": "569da98d2bd2ba1751878e3ef307da00021bbc858bbb776888cd02694d41dade",
     },
     "seed3_sampler": {
-        "frames": "f015d5dd15fa9317700e264df30c310dbe8fcb93b83153bc977ff1a714245049",
-        "votes": "57d3123b5e884cb57e5f9ef4e466fedb3804faa17bc884b81a0864cfb8be1abc",
-        "metrics": "630d16db8c50c8be12a1fa8051a1adf5fef0f0b3d82c25e3aec5e94352409232",
-        "config": "443aed521ac26f3e07a0ffd86d55a85dc766ce69c062f4de15b06ab30f503294",
+        "frames": "0b3be2e3335e636b8b34b7ccf4381b81b64eb2feffb5895f78e6dcedf296fb82",
+        "votes": "583737dc87ed94a083233e9574af33f55275f6fac30089f3fbdf42739c4e9ad9",
+        "metrics": "79bd1bb6a57f2d868f254f92f21c831ac15de8c8f43acdb41f30278484e39f7c",
+        "config": "bee47dc6fd4f8a7130a3dd6d4205f7ddc490ee029ad11c998d2db281675f53a1",
     },
 }
 DEMO_ARGS = ["--seed", "0"]  # the README's demo: cablesim explore --seed 0 --out runs/demo

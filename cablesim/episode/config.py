@@ -184,7 +184,12 @@ class RetreatConfig(Config):
 
     SECTION = "retreat"
 
-    back_off: float = 0.12  # m pulled back along -approach after release
+    # m pulled back along -approach after release.  At 0.12 the joint motion out of view began
+    # among the hanging cables and the hand and link7 dragged a neighbour until it tore
+    # (``diverged``): of such seeds on the board, 9452, 9469, 9483 (electrical cable) and
+    # 9623, 9646, 9652, 9673 (rope), all seven held at 0.25 (thin-wire seeds 9543 and 9587
+    # tear at the same moment either way, before the joint motion)
+    back_off: float = 0.25
     # joint configuration out of view; None: the set-up's park configuration (the scene's
     # ``robot.park_qpos`` in simulation, ``PARK_QPOS`` otherwise).  With ground truth the
     # target frame is checked for zero robot pixels.
