@@ -11,7 +11,8 @@ start of each action it draws, from its seeded generator, a few vertex bodies of
 hose, an amplitude ``A``, a period ``P``, a phase and a unit direction ``e`` in the board plane;
 before every physics step of the action it sets ``data.xfrc_applied`` on those vertices: a
 damped, capped spring pulls each towards ``rest + A sin(2 pi (t - t0) / P + phase) e``, where
-``rest`` is the vertex's position when the action started.  The motion is independent of the
+``rest`` is the vertex's position when the action started (its gains scaled down on a vertex
+lighter than :data:`REFERENCE_MASS`).  The motion is independent of the
 gripper (its own period and phase).  When the action ends the forces are removed, so release,
 retreat and settling (and the target frame) are not disturbed::
 
@@ -30,6 +31,14 @@ import mujoco
 import numpy as np
 
 from cablesim.sim.config import PerturbConfig
+
+#: kg: the config's stiffness, damping and force cap are for a vertex at least this heavy (the
+#: garden hose's weighs 4.3 g); a lighter one gets them times its mass over this, so that the
+#: pull moves every cable alike.  Unscaled, the explicit damping (3 N s/m, over a 4 ms step)
+#: overshot on light vertices: 136 of the 140 thin-wire scenes (0.2 g vertices) the
+#: realistic-flow benchmark tried tore during the perturbed actions; the electrical cable's
+#: (1.6 g) and the rope's (1.3 g) got 2.7 and 3.4 times the hose's damping per unit mass.
+REFERENCE_MASS = 0.004
 
 
 @dataclass
@@ -118,10 +127,13 @@ class NeighbourPerturbation:
             off = ramp * p.amplitude * math.sin(2 * math.pi * t / p.period + p.phase)
             target = p.rest + off * p.direction
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, p.body, vel, 0)
-            f = cfg.stiffness * (target - d.xpos[p.body]) - cfg.damping * vel[3:]
+            # a vertex lighter than REFERENCE_MASS gets the gains and the cap in proportion to
+            # its mass: the same pull per unit mass as the hose's
+            s = min(1.0, float(m.body_mass[p.body]) / REFERENCE_MASS)
+            f = s * (cfg.stiffness * (target - d.xpos[p.body]) - cfg.damping * vel[3:])
             norm = float(np.linalg.norm(f))
-            if norm > cfg.max_force:
-                f *= cfg.max_force / norm
+            if norm > s * cfg.max_force:
+                f *= s * cfg.max_force / norm
             d.xfrc_applied[p.body, :3] = f
 
     def stop(self, world: Any) -> None:
