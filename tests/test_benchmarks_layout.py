@@ -90,3 +90,30 @@ def test_realistic_flow_scenes_of_another_kind_or_surface_are_recorded_apart() -
         "solid",
     )
     assert scene.seed == 905
+
+
+def test_recording_a_scene_again_clears_its_cached_statistics(tmp_path, monkeypatch) -> None:
+    """``evaluate`` caches perception statistics per scene name; a scene recorded again (here one
+    already marked failed is left alone, a new one clears them before it simulates) must not be
+    scored with the statistics of its earlier frames."""
+    from benchmarks.experiments.realistic_flow import evaluate, record
+    from benchmarks.experiments.realistic_flow.record import Scene, record_scene
+
+    scene = Scene("test", 905, "solid", "default", "thin_wire")
+    assert scene.stats_path == evaluate.STATS / scene.name
+    monkeypatch.setattr(record, "CACHE", tmp_path)
+    stale = scene.stats_path / "noisy" / "target.npz"
+    stale.parent.mkdir(parents=True)
+    stale.write_bytes(b"old")
+    scene.failed_path.parent.mkdir(parents=True, exist_ok=True)
+    scene.failed_path.write_text("{}")
+    assert record_scene(scene)[1] == "failed" and stale.exists()  # not recorded again: kept
+    scene.failed_path.unlink()
+
+    def refuse(*args, **kwargs):
+        assert not stale.exists(), "the statistics outlived the new recording"
+        raise RuntimeError("stop before simulating")
+
+    monkeypatch.setattr("cablesim.sim.session.simulate_episode", refuse)
+    assert record_scene(scene)[1] == "failed"
+    assert not stale.exists()

@@ -49,7 +49,7 @@ from cablesim.perception.refine import (
 from cablesim.perception.segmentation import SegmentationAccumulator, SegmentationResult
 from cablesim.perception.tuning import TuningResult, TuningRow, tune_thresholds
 
-STATS = CACHE / TAG / "stats"
+STATS = CACHE / TAG / "stats"  # per scene: Scene.stats_path (record clears it)
 
 
 # --------------------------------------------------------------------------------- streams

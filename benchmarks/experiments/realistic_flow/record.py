@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import time
 import traceback
 from collections.abc import Iterable
@@ -54,6 +55,11 @@ class Scene:
     @property
     def path(self) -> Path:
         return CACHE / TAG / self.name
+
+    @property
+    def stats_path(self) -> Path:
+        """Where ``evaluate`` caches this scene's perception statistics."""
+        return CACHE / TAG / "stats" / self.name
 
     @property
     def failed_path(self) -> Path:
@@ -134,6 +140,9 @@ def record_scene(scene: Scene) -> tuple[Scene, str, float]:
     if scene.status() != "todo":
         return scene, scene.status(), 0.0
     scene.path.parent.mkdir(parents=True, exist_ok=True)
+    # perception statistics cached from an earlier recording of this name describe other frames
+    # (evaluate reused them after a scene was recorded again, giving stale scores)
+    shutil.rmtree(scene.stats_path, ignore_errors=True)
     try:
         ep = simulate_episode(scene.config(), record_to=scene.path, overwrite=True)
         ok, reason = ep.result.success, ep.result.reason
