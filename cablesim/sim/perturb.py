@@ -49,6 +49,7 @@ class _Pull:
     amplitude: float
     period: float
     phase: float
+    scale: float  # of the gains and the cap: min(1, the vertex's mass / REFERENCE_MASS)
 
 
 class NeighbourPerturbation:
@@ -100,7 +101,8 @@ class NeighbourPerturbation:
             phase = float(rng.uniform(0, 2 * math.pi))
             for k in sorted(int(k) for k in ks):
                 b = int(bodies[k])
-                self._pulls.append(_Pull(b, d.xpos[b].copy(), e, amp, period, phase))
+                scale = min(1.0, float(world.model.body_mass[b]) / REFERENCE_MASS)
+                self._pulls.append(_Pull(b, d.xpos[b].copy(), e, amp, period, phase, scale))
             self.log.append(
                 {
                     "time": float(d.time),
@@ -129,7 +131,7 @@ class NeighbourPerturbation:
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, p.body, vel, 0)
             # a vertex lighter than REFERENCE_MASS gets the gains and the cap in proportion to
             # its mass: the same pull per unit mass as the hose's
-            s = min(1.0, float(m.body_mass[p.body]) / REFERENCE_MASS)
+            s = p.scale
             f = s * (cfg.stiffness * (target - d.xpos[p.body]) - cfg.damping * vel[3:])
             norm = float(np.linalg.norm(f))
             if norm > s * cfg.max_force:

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks.experiments.realistic_flow.record import CACHE, TAG, Scene
+from benchmarks.experiments.realistic_flow.record import Scene
 from cablesim.frames import Frame, FrameTruth, Intrinsics, Stream
 from cablesim.perception.actions import action_direction
 from cablesim.perception.correlation import (
@@ -48,8 +48,6 @@ from cablesim.perception.refine import (
 )
 from cablesim.perception.segmentation import SegmentationAccumulator, SegmentationResult
 from cablesim.perception.tuning import TuningResult, TuningRow, tune_thresholds
-
-STATS = CACHE / TAG / "stats"  # per scene: Scene.stats_path (record clears it)
 
 
 # --------------------------------------------------------------------------------- streams
@@ -279,7 +277,7 @@ def compute_variants(
 def _stats_path(scene: Scene, noisy: bool, flow: str, sample: str) -> Path:
     if flow == "oracle" and SAMPLES[sample].photometric is None:
         noisy = False  # ground-truth flow and arm masks do not see the sensor noise
-    return STATS / scene.name / ("noisy" if noisy else "clean") / flow / f"{sample}.npz"
+    return scene.stats_path / ("noisy" if noisy else "clean") / flow / f"{sample}.npz"
 
 
 def save_stats(path: Path, st: StreamStatistics) -> None:
@@ -350,7 +348,7 @@ def ensure_stats(
         t0 = time.time()
         lean = load_stream(sc, noisy)
         # the target-frame cues need the target: keep it beside the statistics
-        tpath = STATS / sc.name / ("noisy" if noisy else "clean") / "target.npz"
+        tpath = sc.stats_path / ("noisy" if noisy else "clean") / "target.npz"
         if not tpath.exists():
             tpath.parent.mkdir(parents=True, exist_ok=True)
             t = lean.stream.target
@@ -415,7 +413,7 @@ class Target:
 
 
 def load_target(scene: Scene, noisy: bool) -> Target:
-    p = STATS / scene.name / ("noisy" if noisy else "clean") / "target.npz"
+    p = scene.stats_path / ("noisy" if noisy else "clean") / "target.npz"
     with np.load(p) as z:
         k = z["K"]
         K = Intrinsics(float(k[0]), float(k[1]), float(k[2]), float(k[3]), int(k[4]), int(k[5]))
