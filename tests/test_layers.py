@@ -308,3 +308,11 @@ def test_light_packages_load_no_optional_heavy_package() -> None:
     for package in ("cablesim.perception", "cablesim.episode", "cablesim.robot"):
         out = _fresh(package, heavy)
         assert not out["loaded"], f"importing {package} loads {out['loaded']}"
+
+
+def test_a_simulated_run_does_not_import_trimesh() -> None:
+    # trimesh only writes the shipped connector meshes (python -m cablesim.sim.assets); the
+    # simulator reads the files, and the import cost every command ~0.3 s of CPU (issue 21)
+    for package in ("cablesim.sim", "cablesim.commands"):
+        out = _fresh(package, ("trimesh",))
+        assert not out["loaded"], f"importing {package} loads {out['loaded']}"
