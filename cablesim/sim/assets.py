@@ -96,7 +96,8 @@ def cables_texture(size: int = TEXTURE_SIZE, seed: int = 3) -> np.ndarray:
 
 def male_connector_mesh() -> trimesh.Trimesh:
     """Male garden-hose connector along +z from z = 0 (base flange) to its tip at z = 0.06."""
-    import trimesh  # only where the meshes are (re)written: ~0.3 s of CPU for every run
+    # only where the meshes are (re)written, not on every run (~0.3 s of CPU)
+    import trimesh  # lazy: optional heavy package
 
     hexnut = trimesh.creation.cylinder(radius=0.016, height=0.012, sections=6)
     hexnut.apply_translation([0, 0, 0.006])
@@ -109,7 +110,7 @@ def male_connector_mesh() -> trimesh.Trimesh:
 
 def female_connector_mesh() -> trimesh.Trimesh:
     """Female coupling on a hose end, along +z from z = 0 (mating face) to z = 0.05."""
-    import trimesh
+    import trimesh  # lazy: optional heavy package
 
     parts = []
     nut = trimesh.creation.cylinder(radius=0.0165, height=0.022, sections=12)
