@@ -7,6 +7,10 @@ and the seed sweep (:mod:`cablesim.sweep`) take these lines from:
 - :func:`git_commit`: the cablesim checkout's short commit, ``(with uncommitted changes)``
   added when tracked files differ from it, ``unknown`` outside a checkout;
 - :func:`cpu_model`, :func:`machine`: CPU model, cores, platform and Python;
+- :func:`float_platform`: architecture and CPU vendor, the machines whose floating point
+  results agree bit for bit (MuJoCo, NumPy and Mesa's llvmpipe take vendor-specific SIMD
+  paths: the same seed gave the same votes and last-digit-different floats and frames on an
+  Intel Xeon and an AMD EPYC machine of this project);
 - :func:`load_average`: the 1, 5 and 15 minute load averages;
 - :func:`provenance`: all of them as one dict.
 """
@@ -22,6 +26,7 @@ from typing import Any
 
 __all__ = [
     "cpu_model",
+    "float_platform",
     "git_commit",
     "load_average",
     "machine",
@@ -37,13 +42,24 @@ def utc_date() -> str:
 
 def cpu_model() -> str:
     """The CPU's model name (``/proc/cpuinfo``), else what ``platform`` says, else unknown."""
+    return _cpuinfo("model name") or platform.processor() or "unknown"
+
+
+def _cpuinfo(key: str) -> str | None:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
+            if line.startswith(key):
                 return line.split(":", 1)[1].strip()
     except OSError:
         pass
-    return platform.processor() or "unknown"
+    return None
+
+
+def float_platform() -> str:
+    """``x86_64 GenuineIntel``, ``x86_64 AuthenticAMD``: the architecture and the CPU vendor
+    (``/proc/cpuinfo``'s ``vendor_id``; ``unknown`` where there is none). Runs repeat bit
+    for bit on one machine; pinned result hashes are kept per platform."""
+    return f"{platform.machine() or 'unknown'} {_cpuinfo('vendor_id') or 'unknown'}"
 
 
 def machine() -> str:
