@@ -52,10 +52,6 @@ class CableKind:
     pattern: str = "solid"
     pattern_period: float = 0.03  # m: stripe spacing, marking repeat, strand lay length
     pattern_color: RGB | None = None  # None: the pattern's own contrast with the cable colour
-    # kg on each vertex dof: inertia without weight (MuJoCo's joint armature).  A contact's
-    # give is in proportion to force over mass, so a light vertex pressed by the fingers or a
-    # crossing cable sinks through the mat; armature stiffens that without changing the sag
-    armature: float = 0.0
 
     def bending_stiffness(self) -> tuple[float, float]:
         """EI range (N m^2) the ``young`` range gives at ``radius``."""
@@ -70,9 +66,7 @@ class CableKind:
             f"EI {ei[0]:.2g}-{ei[1]:.2g} N m^2  (E {self.young[0]:.3g}-{self.young[1]:.3g} Pa)  "
             f"{1e3 * self.mass_per_metre:.0f} g/m  friction {self.friction:g}  "
             f"damping {self.damping:g} N s/m  segment {1e3 * self.segment_length:.0f} mm  "
-            f"{self.pattern}  {len(self.colors)} colours"
-            + (f"  armature {1e3 * self.armature:g} g" if self.armature else "")
-            + f": {self.summary}"
+            f"{self.pattern}  {len(self.colors)} colours: {self.summary}"
         )
 
 
@@ -155,9 +149,6 @@ ELECTRICAL_CABLE = CableKind(
     "(10-60 MPa), checked against MuJoCo's demo cable (EI 2e-3); PVC on wood 0.3-0.6",
     pattern="marking",
     pattern_period=0.05,
-    # a 2 cm vertex weighs 1.6 g (the hose's 4.5 g): without it the fingers or a crossing
-    # cable pressed vertices through the table's mat (docs/cables.md, "What fails")
-    armature=0.003,
 )
 
 THIN_WIRE = CableKind(

@@ -217,7 +217,6 @@ class HoseConfig(Config):
     poisson: float | None = None
     mass_per_metre: float | None = None  # kg/m
     damping: float | None = None  # N s/m on each vertex dof (air drag, internal losses)
-    armature: float | None = None  # kg on each vertex dof: inertia without weight
     both_ends_probability: float = 0.75  # else attached at one end and hanging free
     colors: tuple[tuple[float, float, float], ...] | None = None
     color_jitter: float | None = None
@@ -323,8 +322,6 @@ class HoseConfig(Config):
             raise ConfigError(name("poisson"), f"must be in [0, 0.5), got {c.poisson}")
         check_positive(name("mass_per_metre"), c.mass_per_metre)
         check_positive(name("damping"), c.damping, allow_zero=True)
-        check_positive(name("armature"), c.armature, allow_zero=True)
-        check_number(name("armature"), c.armature, hi=1.0)
         if not c.colors:
             raise ConfigError(name("colors"), "need at least one colour")
         for i, rgb in enumerate(c.colors):
@@ -352,7 +349,6 @@ _CABLE_OVERRIDES = (
     "poisson",
     "mass_per_metre",
     "damping",
-    "armature",
     "colors",
     "color_jitter",
     "friction",

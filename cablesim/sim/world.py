@@ -349,19 +349,16 @@ def _quat_z_to(d: np.ndarray) -> tuple[float, float, float, float]:
 
 def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose]) -> None:
     """Velocity damping on every hose dof (air drag and the cable's internal losses), the
-    cable kind's ``damping``, and its ``armature`` on every vertex slide dof."""
-    by_name = {h.spec.name + "_": h.spec.cable for h in hoses}
+    cable kind's ``damping``."""
+    by_name = {h.spec.name + "_": h.spec.cable.damping for h in hoses}
     names = tuple(by_name)
     for j in range(model.njnt):
         body = model.body(model.jnt_bodyid[j]).name
         if body.startswith(names):
-            cable = next(c for n, c in by_name.items() if body.startswith(n))
-            damping = cable.damping
+            damping = next(d for n, d in by_name.items() if body.startswith(n))
             adr = model.jnt_dofadr[j]
             if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
                 model.dof_damping[adr] = damping
-                if cable.armature:
-                    model.dof_armature[adr] = cable.armature
             elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
                 model.dof_damping[adr] = damping * 1e-4
 
