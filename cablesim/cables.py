@@ -52,6 +52,10 @@ class CableKind:
     pattern: str = "solid"
     pattern_period: float = 0.03  # m: stripe spacing, marking repeat, strand lay length
     pattern_color: RGB | None = None  # None: the pattern's own contrast with the cable colour
+    # each vertex's inertia times this, its weight unchanged (mass x s, gravity compensation
+    # 1 - 1/s, damping x s): a soft contact gives way in proportion to force over mass, so the
+    # fingers or a crossing cable press a light vertex through the table's mat; 1: as built
+    inertia_scale: float = 1.0
 
     def bending_stiffness(self) -> tuple[float, float]:
         """EI range (N m^2) the ``young`` range gives at ``radius``."""
@@ -66,7 +70,9 @@ class CableKind:
             f"EI {ei[0]:.2g}-{ei[1]:.2g} N m^2  (E {self.young[0]:.3g}-{self.young[1]:.3g} Pa)  "
             f"{1e3 * self.mass_per_metre:.0f} g/m  friction {self.friction:g}  "
             f"damping {self.damping:g} N s/m  segment {1e3 * self.segment_length:.0f} mm  "
-            f"{self.pattern}  {len(self.colors)} colours: {self.summary}"
+            f"{self.pattern}  {len(self.colors)} colours"
+            + (f"  inertia x{self.inertia_scale:g}" if self.inertia_scale != 1 else "")
+            + f": {self.summary}"
         )
 
 
@@ -149,6 +155,7 @@ ELECTRICAL_CABLE = CableKind(
     "(10-60 MPa), checked against MuJoCo's demo cable (EI 2e-3); PVC on wood 0.3-0.6",
     pattern="marking",
     pattern_period=0.05,
+    inertia_scale=2.8,  # a 2 cm vertex weighs 1.6 g; moves like the hose's 4.5 g
 )
 
 THIN_WIRE = CableKind(

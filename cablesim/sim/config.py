@@ -217,6 +217,7 @@ class HoseConfig(Config):
     poisson: float | None = None
     mass_per_metre: float | None = None  # kg/m
     damping: float | None = None  # N s/m on each vertex dof (air drag, internal losses)
+    inertia_scale: float | None = None  # vertex inertia x this, weight unchanged
     both_ends_probability: float = 0.75  # else attached at one end and hanging free
     colors: tuple[tuple[float, float, float], ...] | None = None
     color_jitter: float | None = None
@@ -322,6 +323,7 @@ class HoseConfig(Config):
             raise ConfigError(name("poisson"), f"must be in [0, 0.5), got {c.poisson}")
         check_positive(name("mass_per_metre"), c.mass_per_metre)
         check_positive(name("damping"), c.damping, allow_zero=True)
+        check_number(name("inertia_scale"), c.inertia_scale, lo=1.0, hi=100.0)
         if not c.colors:
             raise ConfigError(name("colors"), "need at least one colour")
         for i, rgb in enumerate(c.colors):
@@ -349,6 +351,7 @@ _CABLE_OVERRIDES = (
     "poisson",
     "mass_per_metre",
     "damping",
+    "inertia_scale",
     "colors",
     "color_jitter",
     "friction",

@@ -101,7 +101,9 @@ class NeighbourPerturbation:
             phase = float(rng.uniform(0, 2 * math.pi))
             for k in sorted(int(k) for k in ks):
                 b = int(bodies[k])
-                scale = min(1.0, float(world.model.body_mass[b]) / REFERENCE_MASS)
+                m = world.model  # the vertex's weight (an inertia_scale is compensated)
+                weight = float(m.body_mass[b]) * (1.0 - float(m.body_gravcomp[b]))
+                scale = min(1.0, weight / REFERENCE_MASS)
                 self._pulls.append(_Pull(b, d.xpos[b].copy(), e, amp, period, phase, scale))
             self.log.append(
                 {

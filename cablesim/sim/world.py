@@ -170,7 +170,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
         top = start_shape(cfg, s)[0]
         spacing = s.length / (s.n_vertices - 1)
         c = s.cable
-        mass = c.mass_per_metre * s.length
+        mass = c.mass_per_metre * s.length * c.inertia_scale  # weight: gravity compensation
         section = ""
         if h.section == "box":
             size = h.section_size or (c.radius, c.radius)
@@ -347,10 +347,21 @@ def _quat_z_to(d: np.ndarray) -> tuple[float, float, float, float]:
     return (math.cos(math.pi / 4), axis[0] * s, axis[1] * s, axis[2] * s)
 
 
+def compensate_weight(spec: mujoco.MjSpec, name: str, cable: CableKind) -> None:
+    """The cable ``name``'s vertex bodies carry ``1 - 1/inertia_scale`` of their own weight by
+    gravity compensation: built with ``inertia_scale`` times the kind's mass, they weigh what
+    the kind weighs and move as if heavier (:attr:`CableKind.inertia_scale`)."""
+    if cable.inertia_scale == 1:
+        return
+    for body in spec.bodies:
+        if body.name.startswith(f"{name}_"):
+            body.gravcomp = 1.0 - 1.0 / cable.inertia_scale
+
+
 def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose]) -> None:
     """Velocity damping on every hose dof (air drag and the cable's internal losses), the
-    cable kind's ``damping``."""
-    by_name = {h.spec.name + "_": h.spec.cable.damping for h in hoses}
+    cable kind's ``damping`` times its ``inertia_scale`` (the same decay as built)."""
+    by_name = {h.spec.name + "_": h.spec.cable.damping * h.spec.cable.inertia_scale for h in hoses}
     names = tuple(by_name)
     for j in range(model.njnt):
         body = model.body(model.jnt_bodyid[j]).name
@@ -419,6 +430,8 @@ class World:
             spec = mujoco.MjSpec.from_string(_scene_xml(cfg, hose_specs, cam))
         except (ValueError, mujoco.FatalError) as e:  # names the failing part for the user
             raise PhysicsDivergedError(f"the scene failed to compile: {e}") from e
+        for s in hose_specs:
+            compensate_weight(spec, s.name, s.cable)
         panda = panda_base = None
         if cfg.robot.enabled:
             yaw = cfg.robot.base_yaw
