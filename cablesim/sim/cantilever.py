@@ -20,7 +20,7 @@ import numpy as np
 
 from cablesim.cables import CableKind
 from cablesim.errors import PhysicsDivergedError
-from cablesim.sim.world import cable_xml
+from cablesim.sim.world import cable_xml, compensate_weight
 
 
 def cantilever_sag(
@@ -51,18 +51,21 @@ def cantilever_sag(
             centre,
             "1 0 0 0",
             cable.colors[0],
-            cable.mass_per_metre * length,
+            cable.mass_per_metre * length * cable.inertia_scale,
             inner='<pin id="0 1"/>',
         )
     }
   </worldbody>
 </mujoco>"""
-    model = mujoco.MjModel.from_xml_string(xml)
+    spec = mujoco.MjSpec.from_string(xml)
+    compensate_weight(spec, "cable", cable)  # as the scenes: the kind's weight, its inertia
+    model = spec.compile()
     data = mujoco.MjData(model)
+    damping = cable.damping * cable.inertia_scale
     for j in range(model.njnt):  # the scenes' per-dof damping (cablesim.sim.world)
         adr = model.jnt_dofadr[j]
         slide = model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE
-        model.dof_damping[adr] = cable.damping * (1.0 if slide else 1e-4)
+        model.dof_damping[adr] = damping * (1.0 if slide else 1e-4)
     mujoco.mj_step(model, data, nstep=int(round(time / timestep)))
     verts = data.flexvert_xpos
     if not np.isfinite(verts).all():

@@ -111,6 +111,40 @@ def test_a_rope_sags_under_its_own_weight_more_than_a_cable_of_its_diameter() ->
     assert cantilever_sag(rope, rope.young[1]) < cantilever_sag(rope, rope.young[0])
 
 
+def test_inertia_scale_moves_a_cable_as_if_heavier_and_keeps_its_weight() -> None:
+    from cablesim.sim.cantilever import cantilever_sag
+
+    cable = CABLE_KINDS["electrical_cable"]
+    light = dataclasses.replace(cable, inertia_scale=1.0)
+    assert cable.inertia_scale > 1 and GARDEN_HOSE.inertia_scale == 1
+    # settled, the same sag: the weight and the stiffness are the kind's
+    assert cantilever_sag(cable) == pytest.approx(cantilever_sag(light), rel=2e-3)
+    # 0.2 s after the release, the cable that moves as if heavier has fallen less far
+    assert cantilever_sag(cable, time=0.2) < 0.6 * cantilever_sag(light, time=0.2)
+
+
+def test_inertia_scale_keeps_a_lying_cable_out_of_the_mat() -> None:
+    """A soft contact gives way in proportion to force over mass: the settled electrical
+    cables sink less into the table's mat with the kind's inertia than without."""
+    from cablesim.sim.table import MAT_TOP
+    from cablesim.sim.world import World
+
+    radius = CABLE_KINDS["electrical_cable"].radius
+
+    def deepest(scale: float) -> float:
+        hoses = HoseConfig(kind="electrical_cable", inertia_scale=scale)
+        cfg = SceneConfig(
+            seed=21, surface="table", hoses=hoses, camera=CameraConfig(width=64, height=48)
+        ).with_values({"physics.cache": False})
+        world = World.build(cfg)
+        body = world.hoses[0].vertex_bodies[3]
+        assert world.model.body_gravcomp[body] == pytest.approx(1 - 1 / scale)
+        return max(MAT_TOP + radius - world.hose_vertices(i)[:, 2].min() for i in range(4))
+
+    light, heavy = deepest(1.0), deepest(CABLE_KINDS["electrical_cable"].inertia_scale)
+    assert light > 0 and heavy < 0.7 * light, (light, heavy)
+
+
 def test_the_dataset_randomiser_draws_kinds_from_its_own_stream() -> None:
     base = SceneConfig()
     every = Randomization(cable_kinds=tuple(CABLE_KINDS))
