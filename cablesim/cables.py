@@ -155,7 +155,6 @@ ELECTRICAL_CABLE = CableKind(
     "(10-60 MPa), checked against MuJoCo's demo cable (EI 2e-3); PVC on wood 0.3-0.6",
     pattern="marking",
     pattern_period=0.05,
-    inertia_scale=2.8,  # a 2 cm vertex weighs 1.6 g; moves like the hose's 4.5 g
 )
 
 THIN_WIRE = CableKind(
