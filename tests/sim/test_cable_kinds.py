@@ -121,6 +121,9 @@ def test_inertia_scale_moves_a_cable_as_if_heavier_and_keeps_its_weight() -> Non
     assert cantilever_sag(cable) == pytest.approx(cantilever_sag(light), rel=2e-3)
     # 0.2 s after the release, the cable that moves as if heavier has fallen less far
     assert cantilever_sag(cable, time=0.2) < 0.6 * cantilever_sag(light, time=0.2)
+    # lighter than built is not offered (a gravity compensation above 1 would lift it)
+    with pytest.raises(ConfigError, match=r"hoses\.inertia_scale.*0\.5"):
+        HoseConfig(kind="electrical_cable", inertia_scale=0.5)
 
 
 def test_inertia_scale_keeps_a_lying_cable_out_of_the_mat() -> None:
