@@ -60,15 +60,15 @@ def expected(run: str) -> dict[str, Any]:
     return EXPECTED_ALL[here][run]
 
 
-def check_rerun(run: str, got: dict[str, Any]) -> None:
-    """``got`` equals this platform's record of ``run``, key by key; in record mode it becomes
-    that record."""
+def check_rerun(run: str, want: dict[str, Any], got: dict[str, Any]) -> None:
+    """``got`` equals ``want``, this platform's record of ``run`` (:func:`expected`, taken
+    before the run so that a platform with none skips it), key by key; in record mode ``got``
+    becomes that record."""
     if RECORD:
         doc = json.loads(EXPECTED_FILE.read_text())
         doc.setdefault(float_platform(), {})[run] = got
         EXPECTED_FILE.write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
         return
-    want = expected(run)
     assert set(got) == set(want), run
     for key in sorted(want):
         assert got[key] == want[key], f"{run}: {key} differs on {float_platform()!r}"
@@ -319,44 +319,46 @@ def test_the_command_line_says_which_fields_moved(capsys):
 # ---------------------------------------------------------------------- old runs rerun
 @pytest.mark.slow
 def test_old_explore_reruns_to_its_metrics(tmp_path):
-    out = tmp_path / "explore"
+    want, out = expected("explore"), tmp_path / "explore"
     assert (
         main(["explore", "--config", str(DATA / "explore.json"), "--out", str(out), "--quiet"]) == 0
     )
-    files = expected("explore")["files"]
     metrics = stable(json.loads((out / "metrics.json").read_text()))
-    check_rerun("explore", {"metrics": metrics, "files": {n: digest(out / n) for n in files}})
+    files = {n: digest(out / n) for n in want["files"]}
+    check_rerun("explore", want, {"metrics": metrics, "files": files})
 
 
 @pytest.mark.slow
 def test_old_episode_reruns_to_its_summary_and_frames(tmp_path):
-    out = tmp_path / "episode"
+    want, out = expected("episode"), tmp_path / "episode"
     assert (
         main(["episode", "--config", str(DATA / "episode.json"), "--out", str(out), "--quiet"]) == 0
     )
-    files = expected("episode")["files"]  # recording/index.jsonl holds every frame's sha256
     summary = stable(json.loads((out / "summary.json").read_text()))
-    check_rerun("episode", {"summary": summary, "files": {n: digest(out / n) for n in files}})
+    # recording/index.jsonl holds every frame's sha256
+    files = {n: digest(out / n) for n in want["files"]}
+    check_rerun("episode", want, {"summary": summary, "files": files})
 
 
 def test_old_scene_reruns_to_its_files(tmp_path):
-    out = tmp_path / "scene"
+    want, out = expected("scene"), tmp_path / "scene"
     assert main(["scene", "--config", str(DATA / "scene.json"), "--out", str(out)]) == 0
-    files = expected("scene")["files"]
     scene = stable(json.loads((out / "scene.json").read_text()))
-    check_rerun("scene", {"scene": scene, "files": {n: digest(out / n) for n in files}})
+    check_rerun(
+        "scene", want, {"scene": scene, "files": {n: digest(out / n) for n in want["files"]}}
+    )
 
 
 @pytest.mark.slow
 def test_old_thesis_benchmark_reruns_to_its_results(tmp_path):
-    out = tmp_path / "thesis"
+    want, out = expected("thesis"), tmp_path / "thesis"
     argv = ["benchmark", "thesis", "--config", str(DATA / "thesis.json"), "--out", str(out)]
     assert main([*argv, "--quiet"]) == 0
     results = {
         p.name: json_digest(stable(json.loads(p.read_text())))
         for p in sorted((out / "results").glob("*.json"))
     }
-    check_rerun("thesis", {"results": results})
+    check_rerun("thesis", want, {"results": results})
 
 
 @pytest.mark.slow
@@ -365,6 +367,7 @@ def test_old_dataset_job_reruns_to_its_files(tmp_path):
     is what reruns it."""
     from cablesim.jobs import Job, execute
 
+    want = expected("dataset")
     record = json.loads((DATA / "dataset_mcor_job.json").read_text())
     params = {**record["params"], "root": str(tmp_path / "dataset")}
     summary = execute(
@@ -373,7 +376,7 @@ def test_old_dataset_job_reruns_to_its_files(tmp_path):
     assert summary.ok == 1
     doc = json.loads((tmp_path / "jobs" / f"{record['key']}.json").read_text())
     # the job record's result is the file's own on the platform that wrote it, else recorded
-    result = expected("dataset").get("result", stable(record["result"]))
+    result = want.get("result", stable(record["result"]))
     assert RECORD or stable(doc["result"]) == result
     got = {
         str(p.relative_to(tmp_path / "dataset")): digest(p)
@@ -381,9 +384,9 @@ def test_old_dataset_job_reruns_to_its_files(tmp_path):
         if p.is_file()
     }
     rerun = {"files": len(got), "digest": json_digest(got)}
-    if "result" in expected("dataset") or stable(doc["result"]) != stable(record["result"]):
+    if "result" in want or stable(doc["result"]) != stable(record["result"]):
         rerun["result"] = stable(doc["result"])
-    check_rerun("dataset", rerun)
+    check_rerun("dataset", want, rerun)
 
 
 @pytest.mark.slow
@@ -391,6 +394,7 @@ def test_old_environment_config_resets_and_steps_as_before():
     from cablesim.envs import HoseExploreEnv
     from cablesim.envs.aim import aim_at_segment
 
+    want = expected("env")
     cfg, _ = load(HoseExploreConfig, "env_fast_config.json")
     env = HoseExploreEnv(cfg)
     try:
@@ -401,7 +405,7 @@ def test_old_environment_config_resets_and_steps_as_before():
         got["step_info"] = json.loads(json.dumps(info, default=float))
     finally:
         env.close()
-    check_rerun("env", got)
+    check_rerun("env", want, got)
 
 
 def _obs_digest(obs: dict[str, np.ndarray]) -> dict[str, str]:
