@@ -20,7 +20,7 @@ import numpy as np
 
 from cablesim.cables import CableKind
 from cablesim.errors import PhysicsDivergedError
-from cablesim.sim.world import cable_xml, compensate_weight
+from cablesim.sim.world import cable_xml, compensate_weight, damp_cable_dofs
 
 
 def cantilever_sag(
@@ -61,11 +61,7 @@ def cantilever_sag(
     compensate_weight(spec, "cable", cable)  # as the scenes: the kind's weight, its inertia
     model = spec.compile()
     data = mujoco.MjData(model)
-    damping = cable.damping * cable.inertia_scale
-    for j in range(model.njnt):  # the scenes' per-dof damping (cablesim.sim.world)
-        adr = model.jnt_dofadr[j]
-        slide = model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE
-        model.dof_damping[adr] = damping * (1.0 if slide else 1e-4)
+    damp_cable_dofs(model, range(model.njnt), cable)  # the scenes' per-dof damping
     mujoco.mj_step(model, data, nstep=int(round(time / timestep)))
     verts = data.flexvert_xpos
     if not np.isfinite(verts).all():

@@ -20,7 +20,7 @@ far end attached to a second connector is held by a ``connect`` equality (SPEC s
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -358,20 +358,31 @@ def compensate_weight(spec: mujoco.MjSpec, name: str, cable: CableKind) -> None:
             body.gravcomp = 1.0 - 1.0 / cable.inertia_scale
 
 
+def damp_cable_dofs(model: mujoco.MjModel, joints: Iterable[int], cable: CableKind) -> None:
+    """Velocity damping on a cable's vertex joints ``joints`` (air drag and its internal
+    losses): the kind's ``damping`` times its ``inertia_scale`` (the same decay as built) on
+    each slide dof, 1e-4 of that on each hinge dof."""
+    damping = cable.damping * cable.inertia_scale
+    for j in joints:
+        adr = model.jnt_dofadr[j]
+        if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
+            model.dof_damping[adr] = damping
+        elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
+            model.dof_damping[adr] = damping * 1e-4
+
+
 def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose]) -> None:
-    """Velocity damping on every hose dof (air drag and the cable's internal losses), the
-    cable kind's ``damping`` times its ``inertia_scale`` (the same decay as built)."""
-    by_name = {h.spec.name + "_": h.spec.cable.damping * h.spec.cable.inertia_scale for h in hoses}
-    names = tuple(by_name)
+    """:func:`damp_cable_dofs` on every hose's vertex joints."""
+    prefixes = [h.spec.name + "_" for h in hoses]
+    joints: list[list[int]] = [[] for _ in hoses]
     for j in range(model.njnt):
         body = model.body(model.jnt_bodyid[j]).name
-        if body.startswith(names):
-            damping = next(d for n, d in by_name.items() if body.startswith(n))
-            adr = model.jnt_dofadr[j]
-            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE:
-                model.dof_damping[adr] = damping
-            elif model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
-                model.dof_damping[adr] = damping * 1e-4
+        for k, prefix in enumerate(prefixes):
+            if body.startswith(prefix):
+                joints[k].append(j)
+                break
+    for hose, js in zip(hoses, joints, strict=True):
+        damp_cable_dofs(model, js, hose.spec.cable)
 
 
 class World:
