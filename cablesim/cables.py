@@ -55,7 +55,7 @@ class CableKind:
     # each vertex's inertia times this, its weight unchanged (mass x s, gravity compensation
     # 1 - 1/s, damping x s): a soft contact gives way in proportion to force over mass, so the
     # fingers or a crossing cable press a light vertex through the table's mat; 1: as built
-    # (the thin wire: 10; mass scaling, as in explicit finite elements, for slow handling)
+    # (mass scaling, as in explicit finite elements; no kind uses it: docs/cables.md)
     inertia_scale: float = 1.0
 
     def bending_stiffness(self) -> tuple[float, float]:
@@ -182,9 +182,6 @@ THIN_WIRE = CableKind(
     sources="stranded PVC wire tables (1.0 mm^2: 1.8 mm, 1.5 mm^2: 2.2 mm; UL1007 18 AWG "
     "about 10 g/m); EI 3.9e-5-3.1e-4 N m^2 from the strands bending on their own "
     "(n E_cu pi d^4 / 64) plus the insulation; stranded, not solid core (which yields)",
-    # a 2 cm vertex weighs 0.2 g: the fingers and crossing wires pressed it through the
-    # table's mat (docs/cables.md); moving as if 10 times heavier, it stays on the mat
-    inertia_scale=10.0,
 )
 
 ROPE = CableKind(
