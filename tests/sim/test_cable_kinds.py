@@ -158,7 +158,7 @@ def test_inertia_scale_keeps_a_pressed_wire_on_the_mat() -> None:
 
     wire = CABLE_KINDS["thin_wire"]
 
-    def deepest(scale: float) -> float:
+    def pressed_depth(scale: float) -> float:
         hoses = HoseConfig(kind="thin_wire", inertia_scale=scale)
         cfg = SceneConfig(
             seed=21, surface="table", hoses=hoses, camera=CameraConfig(width=64, height=48)
@@ -171,7 +171,7 @@ def test_inertia_scale_keeps_a_pressed_wire_on_the_mat() -> None:
         world.step(round(0.3 / world.model.opt.timestep))
         return MAT_TOP + wire.radius - world.hose_vertices(0)[k, 2]
 
-    light, heavy = deepest(1.0), deepest(10.0)
+    light, heavy = pressed_depth(1.0), pressed_depth(10.0)
     assert light > wire.radius and heavy < wire.radius / 2, (light, heavy)
 
 
