@@ -30,6 +30,7 @@ from benchmarks import RESULTS, write_results
 from cablesim import provenance as pv
 from cablesim.config import override
 from cablesim.frames import LABEL_ROBOT
+from cablesim.panda.model import joint_qpos_addresses
 from cablesim.pose import Pose
 from cablesim.sim.config import SURFACE_VIEWS, EpisodeConfig
 from cablesim.sim.session import SimSession
@@ -62,6 +63,7 @@ def measure(view, seed: int) -> dict[str, list[float]]:
         parked = s.camera.render_labels()
         cables = parked >= 0
         q0 = d.qpos.copy()
+        arm = joint_qpos_addresses(m, s.robot.names.joints)
         yy, xx = np.mgrid[: parked.shape[0], : parked.shape[1]]
         out: dict[str, list[float]] = {"near": [], "all": [], "robot": [], "park": []}
         out["park"].append(float((parked == LABEL_ROBOT).sum()))
@@ -69,7 +71,7 @@ def measure(view, seed: int) -> dict[str, list[float]]:
             q = s.robot.solve_ik(Pose.from_rotation(np.array(p), HAND_DOWN))
             if q is None:
                 continue
-            d.qpos[s.robot._qadr] = q
+            d.qpos[arm] = q
             mujoco.mj_forward(m, d)
             labels = s.camera.render_labels()
             d.qpos[:] = q0
