@@ -28,7 +28,7 @@ from typing import Any
 from cablesim.config import Config, check_int, moved_fields
 from cablesim.errors import ConfigError, InputError
 from cablesim.perception.correlation import CorrelationParams
-from cablesim.perception.flow import check_flow
+from cablesim.perception.flow import check_flow, reads_ground_truth
 from cablesim.perception.grasp_sampler import GraspSamplerParams
 from cablesim.perception.methods import check_method
 from cablesim.perception.refine import DEFAULT_REFINE, GrowParams, RefineParams
@@ -54,6 +54,19 @@ MOVED: Mapping[str, str] = {
     "height": "episode.scene.camera.height",
     "perturb": "episode.perturb",
 }
+
+
+#: Explore labels every 8th kept frame (``episode.interaction.capture.truth_every``): it reads
+#: only the target frame's labels and one ground-truth flow example (the picture), and the
+#: other frames' label passes and flows cost about 3 s of a 30 s interaction.  Its votes,
+#: masks and metrics are those of every frame labelled: perception never reads the labels.
+EXPLORE_TRUTH_EVERY = 8
+
+
+def explore_episode() -> EpisodeConfig:
+    """The episode an :class:`ExploreConfig` runs by default: the default one, with
+    :data:`EXPLORE_TRUTH_EVERY`."""
+    return EpisodeConfig().with_values({"interaction.capture.truth_every": EXPLORE_TRUTH_EVERY})
 
 
 def kind_of(strategy: str) -> str:
@@ -96,7 +109,7 @@ class ExploreConfig(Config):
     # colour, CIELAB distance); None: off (the default: it relies on distinctly coloured hoses)
     grow_colour: float | None = None
     random_tries: int = 30  # random baseline: voted pixels tried per proposal
-    episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    episode: EpisodeConfig = field(default_factory=explore_episode)
     sampler: GraspSamplerParams = field(default_factory=GraspSamplerParams)
     correlation: CorrelationParams = field(default_factory=CorrelationParams)
     segmentation: SegmentationParams = field(default_factory=SegmentationParams)
@@ -136,6 +149,13 @@ class ExploreConfig(Config):
                 raise ConfigError(name, str(e)) from None
         if self.merge not in MERGES:
             raise ConfigError("merge", f"must be one of {MERGES}, got {self.merge!r}")
+        every = self.episode.interaction.capture.truth_every
+        if every != 1 and reads_ground_truth(self.flow):
+            raise ConfigError(
+                "episode.interaction.capture.truth_every",
+                f"must be 1 with flow {self.flow!r}: it reads every frame's ground-truth flow, "
+                f"got {every}",
+            )
         if not isinstance(self.grasps, int) or self.grasps < 1:
             raise ConfigError("grasps", f"must be an integer >= 1, got {self.grasps!r}")
         if self.max_attempts < self.grasps:
@@ -156,9 +176,20 @@ class ExploreConfig(Config):
 
     @classmethod
     def _implied(cls, changes: dict[str, Any]) -> dict[str, Any]:
-        """Setting ``strategy`` sets the interaction kind it runs (unless that is given)."""
+        """Setting ``strategy`` sets the interaction kind it runs, and setting ``flow`` to a
+        back end that reads ground truth (the oracle) labels every frame
+        (``episode.interaction.capture.truth_every`` 1), unless those are given."""
         if "strategy" in changes and "episode.interaction.kind" not in changes:
             changes = {**changes, "episode.interaction.kind": kind_of(str(changes["strategy"]))}
+        every = "episode.interaction.capture.truth_every"
+        flow = changes.get("flow")
+        if isinstance(flow, str) and every not in changes:
+            try:
+                truth = reads_ground_truth(flow)
+            except InputError:
+                truth = False  # _validate names the unknown back end
+            if truth:
+                changes = {**changes, every: 1}
         return changes
 
     @classmethod

@@ -97,9 +97,9 @@ PINNED: dict[str, dict[str, dict[str, str]]] = {
 }
 #: case -> SHA-256 of the run's ``config`` (the same on every platform)
 PINNED_CONFIG: dict[str, str] = {
-    "seed1_not_held": "f2b2db6f0f9086ae2ca0c069f6ac7231e7b5e715a7bc4d9b127146c232d623bd",
-    "seed2_push": "c0d5325f7058388a3ff8b4e171b9009df48e8d52938827d9083d9a9f6984ae4a",
-    "seed3_sampler": "9bce99568072623bb0085c9230f1a0df736e1b5d022e7e403460f46dca486fb6",
+    "seed1_not_held": "f484fcd6556f35b0f4518208a68f8f97defd6db27ccfa51587c8a8f0a077ca1d",
+    "seed2_push": "d8832bf8a6b9f703f5309e76d7c4de97002476ef36584884ab78ed93f94d3a8a",
+    "seed3_sampler": "4a07df499f493015d0794bbe67d88f18f7995b24ef13c79035fb7c65cfc58718",
 }
 DEMO_ARGS = ["--seed", "0"]  # the README's demo: cablesim explore --seed 0 --out runs/demo
 DEMO_METRICS = Path(__file__).parent / "data" / "readme_demo_metrics.json"

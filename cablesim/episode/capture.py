@@ -4,8 +4,10 @@
 tick's gripper pose into the camera frame and keeps the tick only when the gripper moved at
 least ``min_gripper_step`` since the last kept sample of the action (the same rule as
 :func:`cablesim.perception.subsample_by_gripper`); only kept ticks grab their image.  With a
-ground-truth provider every kept frame carries labels, and, once the target frame exists,
-ground-truth flow *from the target frame to it* (``FrameTruth.flow_to_target``).
+ground-truth provider the kept frames carry labels, and, once the target frame exists,
+ground-truth flow *from the target frame to them* (``FrameTruth.flow_to_target``): every
+kept frame, or with ``truth_every`` n > 1 the first kept frame of each action, every n-th
+after it and the target frame (the others' ``Frame.truth`` is None; their images are the same).
 
 Each finished frame goes to ``sink`` (e.g. a recording writer) as soon as it is complete: action
 frames at capture time (without flow), the target frame, then the flows.  Ticks may arrive on
@@ -50,10 +52,12 @@ class FrameCollector:
         truth: TruthProvider | None = None,
         sink: FrameSink | None = None,
         arm_mask: ArmMaskFunction | None = None,
+        truth_every: int = 1,
     ):
         self.T = np.asarray(T_world_camera, float)
         self.min_step = float(min_gripper_step)
         self.truth = truth
+        self.truth_every = max(1, int(truth_every))
         self.sink = sink
         self.arm_mask = arm_mask
         self.frames: list[Frame] = []
@@ -76,6 +80,8 @@ class FrameCollector:
     def end_action(self) -> None:
         with self._lock:
             self.action = None
+            if self.truth is not None:
+                self.truth.label_next(True)
 
     def kept(self, action: int) -> int:
         return sum(1 for f in self.frames if f.action == action)
@@ -92,6 +98,8 @@ class FrameCollector:
             if self._last is not None and np.linalg.norm(tcp.position - self._last) < self.min_step:
                 return
             self._last = tcp.position
+            if self.truth is not None:
+                self.truth.label_next(self._sample % self.truth_every == 0)
             t0, c0 = time.perf_counter(), time.process_time()
             image = tick.image()
             self.render_time += time.perf_counter() - t0
@@ -103,6 +111,8 @@ class FrameCollector:
     # ------------------------------------------------------------------ target
     def capture_target(self, grab: Callable[[], CameraImage], tick: Tick) -> Frame:
         """The target frame: grabbed now, with the gripper state of ``tick``."""
+        if self.truth is not None:
+            self.truth.label_next(True)
         t0, c0 = time.perf_counter(), time.process_time()
         image = grab()
         self.render_time += time.perf_counter() - t0

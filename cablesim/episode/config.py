@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from cablesim.cables import CABLE_KINDS, DEFAULT_KIND
-from cablesim.config import Config, check_positive, check_vector
+from cablesim.config import Config, check_int, check_positive, check_vector
 from cablesim.errors import ConfigError
 from cablesim.panda.description import PARK_QPOS
 
@@ -155,6 +155,13 @@ class CaptureConfig(Config):
     frame_rate: float = 15.0  # frames per second of simulated time (RealSense rate)
     min_gripper_step: float = 0.001  # delta_g in metres; 0 keeps every frame
     ground_truth: bool = True  # labels and flow in FrameTruth (simulation only)
+    # with ground truth: labels (and later ground-truth flow to the target frame) for the first
+    # kept frame of each action and every ``truth_every``-th after it, and for the target
+    # frame; the frames in between carry none (``Frame.truth`` None) and cost one render pass
+    # instead of two, with the same images bit for bit.  1 (the default) labels every frame,
+    # as recordings, datasets and the flow benchmarks need; an exploration needs only the
+    # target frame's labels and one flow example (``ExploreConfig``'s default is 8)
+    truth_every: int = 1
     # the arm model rendered at each frame's joint state through the camera: Frame.arm_mask
     # (on with the real robot; ~20 ms per 640x480 frame, so off by default in simulation)
     arm_masks: bool = False
@@ -168,6 +175,7 @@ class CaptureConfig(Config):
             )
         check_positive("capture.arm_mask_margin", self.arm_mask_margin, allow_zero=True)
         check_positive("capture.min_gripper_step", self.min_gripper_step, allow_zero=True)
+        check_int("capture.truth_every", self.truth_every, lo=1)
 
 
 @dataclass(frozen=True)

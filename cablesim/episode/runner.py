@@ -376,7 +376,12 @@ def act(s: InteractionState) -> bool:
     if s.truth is not None:
         s.truth.begin_interaction(result.hose, result.grasp)
     s.collector = FrameCollector(
-        s.T, cfg.capture.min_gripper_step, s.truth, s.options.sink, s.options.arm_mask
+        s.T,
+        cfg.capture.min_gripper_step,
+        s.truth,
+        s.options.sink,
+        s.options.arm_mask,
+        cfg.capture.truth_every,
     )
     if cfg.kind == "grasp":
         s.directions = prim.action_directions(cfg.actions, result.axis, s.T, s.surface)

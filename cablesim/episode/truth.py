@@ -49,6 +49,10 @@ class TruthProvider(Protocol):
         """A probe of the material hose point between the fingers at ``pose`` (None when no
         hose is there): the grasp is held when it follows the hand."""
 
+    def label_next(self, on: bool) -> None:
+        """Whether the frames grabbed from now on get labels (and later ground-truth flow):
+        the collector's ``capture.truth_every`` rule; an unlabelled frame's truth is None."""
+
     def begin_interaction(self, hose: int | None, grasp: Pose | None) -> None:
         """The interaction on ``hose`` starts from ``grasp`` (after the grasp)."""
 

@@ -18,6 +18,7 @@ also name an installed package's entry point (group ``cablesim.flows``) or ``MOD
 
 from __future__ import annotations
 
+import inspect
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -365,6 +366,16 @@ def check_flow(spec: str | FlowEstimator) -> None:
     ``MODULE:CLASS`` target's module but builds nothing."""
     if not isinstance(spec, FlowEstimator):
         FLOW_BACKENDS.check(spec)
+
+
+def reads_ground_truth(spec: str | FlowEstimator) -> bool:
+    """Whether the flow back end ``spec`` reads the frames' ground-truth flow rather than
+    their images (``image_based`` False: the oracle), so every frame must carry it.  Builds
+    nothing; an unknown spec is an ``InputError`` as in :func:`check_flow`."""
+    if isinstance(spec, FlowEstimator):
+        return not spec.image_based
+    factory = FLOW_BACKENDS.resolve(spec).factory
+    return inspect.isclass(factory) and not getattr(factory, "image_based", True)
 
 
 def flow_names() -> list[str]:

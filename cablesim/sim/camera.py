@@ -3,6 +3,7 @@
     cam = SimCamera(world)                 # one renderer, reused
     img = cam.capture()                    # CameraImage: rgb uint8, metric z-depth float32
     snap = cam.snapshot()                  # + labels and what ground-truth flow needs later
+    img = cam.capture_unlabelled()         # snap.image, bit for bit, without the label pass
     cam.close()
 
 Depth is the z-depth along the optical axis in metres (what OpenGL's depth buffer holds,
@@ -233,6 +234,21 @@ class SimCamera(Camera):
         labels, body, depth = self._render_segmentation(update=self._layers is None)
         return self._snapshot(self._image(rgb, depth), labels, body, depth, meta)
 
+    def capture_unlabelled(self) -> CameraImage:
+        """The image :meth:`snapshot` would give of the current state (its depth: 0 where
+        nothing is hit, the sky included, as the label pass leaves it), without the label pass
+        where the camera is layered: the colour pass's depth over the background segmentation
+        pass's, which is the label pass's depth bit for bit.  Not layered: a snapshot's image.
+        It draws the same noise as a snapshot (one image of each stream)."""
+        if self._layers is None:
+            return self.snapshot().image
+        bg_rgb, bg_raw = self._background_layer()
+        seg_raw = self._background_segmentation()[2]
+        rgb, raw = self._moving_layer()
+        cv2.copyTo(bg_rgb, _behind(raw, bg_raw), rgb)
+        cv2.copyTo(seg_raw, _behind(raw, seg_raw), raw)
+        return self._image(cv2.flip(rgb, 0), self._metric_depth(raw))
+
     def snapshot_of(self, image: CameraImage, **meta: Any) -> SimSnapshot:
         """The snapshot of the current state for an ``image`` already captured in it (only the
         labels are rendered)."""
@@ -347,19 +363,25 @@ class SimCamera(Camera):
             rgb, raw = self._render_raw()
         else:
             bg_rgb, bg_raw = self._background_layer()
-            self._update_scene(self._layers[1])
-            scene = self._ctx().scene
-            sky = scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX]
-            scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = False  # the sky is background
-            try:
-                rgb, raw = self._render_raw()
-            finally:
-                scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = sky
+            rgb, raw = self._moving_layer()
             back = _behind(raw, bg_raw)
             cv2.copyTo(bg_rgb, back, rgb)
             if depth:
                 cv2.copyTo(bg_raw, back, raw)
         return cv2.flip(rgb, 0), self._metric_depth(raw) if depth else None
+
+    def _moving_layer(self) -> tuple[np.ndarray, np.ndarray]:
+        """Colour and raw depth (bottom row first) of the moving layer's colour pass of the
+        current state, without the sky (it is background)."""
+        assert self._layers is not None
+        self._update_scene(self._layers[1])
+        scene = self._ctx().scene
+        sky = scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX]
+        scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = False
+        try:
+            return self._render_raw()
+        finally:
+            scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = sky
 
     def _render_raw(self) -> tuple[np.ndarray, np.ndarray]:
         """Render the current scene; colour and raw depth buffer of that same pass, bottom

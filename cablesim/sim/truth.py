@@ -131,7 +131,8 @@ class SimTruth:
         self.hose: int | None = None
         self.log = MotionLog()
         self._pending: dict[int, Any] = {}  # id(image) -> snapshot, until frame_truth
-        self._snaps: list[Any] = []  # snapshots of the frames, in order
+        self._snaps: list[Any] = []  # snapshots of the frames, in order (None: unlabelled)
+        self._label = True  # whether the next grabbed image is labelled (label_next)
         # keep the snapshots of the last interaction's frames in ``kept`` (flow between any
         # two of its frames afterwards, e.g. back to the first one for MovingCables clips)
         self.keep_snapshots = False
@@ -139,6 +140,8 @@ class SimTruth:
 
     # ---- the clock's grabber ------------------------------------------------------------
     def capture(self) -> CameraImage:
+        if not self._label:  # the same image, without the label pass
+            return self.camera.capture_unlabelled()
         snap = self.camera.snapshot()
         self._pending[id(snap.image)] = snap
         return snap.image
@@ -153,9 +156,12 @@ class SimTruth:
         hp, dist = HosePoint.nearest(self.world, pose.position, hose)
         return hp.position if dist <= GRASP_MAX_DISTANCE else None
 
+    def label_next(self, on: bool) -> None:
+        self._label = bool(on)
+
     def begin_interaction(self, hose: int | None, grasp: Pose | None) -> None:
         self.hose = hose
-        self._pending, self._snaps = {}, []
+        self._pending, self._snaps, self._label = {}, [], True
         hp = None
         if hose is not None and grasp is not None:
             hp, _ = HosePoint.nearest(self.world, grasp.position, hose)
@@ -168,7 +174,10 @@ class SimTruth:
         gain, r2 = self.log.follow_gain(action, direction)
         return ActionTruth(gain, r2, self.log.hose_displacement(action))
 
-    def frame_truth(self, image: CameraImage) -> FrameTruth:
+    def frame_truth(self, image: CameraImage) -> FrameTruth | None:
+        if not self._label:
+            self._snaps.append(None)
+            return None
         snap = self._pending.pop(id(image), None)
         if snap is None:  # a frame grabbed without this provider: label the current state
             snap = self.camera.snapshot_of(image)
@@ -178,15 +187,20 @@ class SimTruth:
     def finish(
         self, frames: Sequence[Frame], sink: FrameSink | None, say: Callable[[str], None]
     ) -> float:
-        """Ground-truth flow from the target (the last frame) to every earlier frame."""
+        """Ground-truth flow from the target (the last frame) to every earlier labelled
+        frame."""
 
         spent = 0.0
         self.kept = list(self._snaps) if self.keep_snapshots else []
         if not frames or not frames[-1].is_target or len(self._snaps) != len(frames):
             return spent
         target_snap = self._snaps[-1]
+        if target_snap is None:
+            return spent
         n = len(frames) - 1
         for i, (frame, snap) in enumerate(zip(frames[:-1], self._snaps[:-1], strict=True)):
+            if snap is None:
+                continue
             t0 = time.perf_counter()
             gt = flow_to_target(snap, target_snap)
             spent += time.perf_counter() - t0

@@ -127,6 +127,7 @@ class TwinTruth:
         self.measured = MotionLog()
         self.report = TwinTruthReport()
         self._snaps: list[Any] = []
+        self._label = True  # whether the next frame is labelled (label_next)
 
     def _synced(self) -> Any:
         state, ok = self.twin.synced(self.sync_timeout, self.joint_tolerance)
@@ -159,9 +160,12 @@ class TwinTruth:
 
         return probe
 
+    def label_next(self, on: bool) -> None:
+        self._label = bool(on)
+
     def begin_interaction(self, hose: int | None, grasp: Pose | None) -> None:
         self.hose = hose
-        self._snaps = []
+        self._snaps, self._label = [], True
         self.point = None
         if hose is not None and grasp is not None:
             self.point, _ = HosePointRef.nearest(self._synced().hose_vertices, grasp.position, hose)
@@ -197,6 +201,9 @@ class TwinTruth:
         return ActionTruth(gain, r2, self.log.hose_displacement(action))
 
     def frame_truth(self, image: CameraImage) -> FrameTruth | None:
+        if not self._label:
+            self._snaps.append(None)
+            return None
         frame = self.twin.frame_at(image.timestamp)
         if frame is None:
             self.report.unlabelled_frames += 1

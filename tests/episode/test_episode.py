@@ -131,6 +131,35 @@ def test_same_seed_same_frames(episode):
         again.close()
 
 
+def test_truth_every_labels_some_frames_with_the_same_images(episode, tmp_path):
+    """``capture.truth_every`` 3: the first kept frame of each action, every third after it
+    and the target frame carry labels and ground-truth flow, equal to those of the run that
+    labels every frame; the others carry none; every image (colour and depth) is the same,
+    and the recording keeps that mix."""
+    ep, _ = episode
+    full = ep.result.stream.frames
+    cfg = small_config().with_values({"interaction.capture.truth_every": 3})
+    sparse_ep = simulate_episode(cfg, record_to=tmp_path / "rec")
+    try:
+        assert sparse_ep.result.success, sparse_ep.result.reason
+        sparse = sparse_ep.result.stream.frames
+        assert_identical(full, sparse)
+        labelled = [f.is_target or f.sample % 3 == 0 for f in sparse]
+        assert [f.truth is not None for f in sparse] == labelled
+        assert 0 < sum(labelled) < len(sparse) / 2
+        for fa, fb in zip(full, sparse, strict=True):
+            if fb.truth is not None:
+                assert np.array_equal(fa.truth.labels, fb.truth.labels)
+                assert np.array_equal(fa.truth.flow_to_target, fb.truth.flow_to_target)
+                assert np.array_equal(fa.truth.flow_valid, fb.truth.flow_valid)
+        assert sparse_ep.result.target_robot_pixels == ep.result.target_robot_pixels
+        replayed = Recording(tmp_path / "rec").to_stream().frames
+        assert [f.truth is not None for f in replayed] == labelled
+        assert_identical(sparse, replayed)
+    finally:
+        sparse_ep.close()
+
+
 class Interrupt(RuntimeError):
     pass
 

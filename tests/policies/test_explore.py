@@ -78,6 +78,23 @@ def test_config_roundtrip_and_validation():
     assert err.value.field == "episode.interaction.kind"
 
 
+def test_explore_labels_every_eighth_frame_unless_its_flow_reads_ground_truth():
+    from cablesim.errors import ConfigError
+
+    assert ExploreConfig().episode.interaction.capture.truth_every == 8
+    assert ExploreConfig.of(flow="dis").episode.interaction.capture.truth_every == 8
+    # the oracle reads every frame's ground-truth flow: setting it labels every frame
+    assert ExploreConfig.of(flow="oracle").episode.interaction.capture.truth_every == 1
+    every = "episode.interaction.capture.truth_every"
+    with pytest.raises(ConfigError) as err:  # unless told otherwise, which cannot work
+        ExploreConfig().with_values({"flow": "oracle", every: 4})
+    assert err.value.field == every and "oracle" in str(err.value)
+    # a file of an earlier cablesim (no truth_every) reruns as it ran: every frame labelled
+    doc = ExploreConfig().to_dict()
+    del doc["episode"]["interaction"]["capture"]["truth_every"]
+    assert ExploreConfig.from_dict(doc).episode.interaction.capture.truth_every == 1
+
+
 def test_warp_votes_follows_flow():
     votes = np.zeros((20, 30), np.int16)
     votes[5:8, 10:12] = 2

@@ -229,6 +229,10 @@ def test_layered_rendering_gives_the_pixels_of_a_full_render():
                 assert np.array_equal(getattr(a, name), getattr(b, name)), name
             c, d = layered.capture(), full.capture()
             assert np.array_equal(c.rgb, d.rgb) and np.array_equal(c.depth, d.depth)
+            # a snapshot's image without its label pass (capture.truth_every)
+            for img in (layered.capture_unlabelled(), full.capture_unlabelled()):
+                assert np.array_equal(img.rgb, a.image.rgb)
+                assert np.array_equal(img.depth, a.image.depth)
 
         same()
         world.data.qpos[joint_qpos_addresses(world.model, world.panda.joints)] = HOME_QPOS
@@ -265,3 +269,32 @@ def test_coarser_sphere_caps_change_almost_no_pixel(world: World):
     print(f"{changed.sum()} pixels and {labels.sum()} labels of {changed.size} changed")
     assert changed.any()  # the setting is in effect
     assert changed.mean() < 1e-3 and labels.mean() < 2e-4
+
+
+def test_unlabelled_capture_is_a_snapshots_image_with_patterns_and_the_arm():
+    """Striped cables (pattern geoms added to every pass) with the arm in view: the image of
+    ``capture_unlabelled`` is the snapshot's, colour and depth (0 where the sky is), bit for
+    bit."""
+    import mujoco
+
+    from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses
+    from cablesim.sim.config import HoseConfig
+
+    cfg = SceneConfig(
+        seed=1,
+        camera=CameraConfig(width=160, height=120),
+        hoses=HoseConfig(pattern="stripes"),
+        robot=RobotConfig(),
+    )
+    world = World.build(cfg)
+    world.data.qpos[joint_qpos_addresses(world.model, world.panda.joints)] = HOME_QPOS
+    mujoco.mj_forward(world.model, world.data)
+    with SimCamera(world) as cam:
+        assert cam.layered
+        for _ in range(3):
+            world.step(20)
+            img, snap = cam.capture_unlabelled(), cam.snapshot()
+            assert (snap.labels == LABEL_ROBOT).sum() > 100
+            assert np.array_equal(img.rgb, snap.image.rgb)
+            assert np.array_equal(img.depth, snap.image.depth)
+            assert (img.depth == 0).any()  # the sky: nothing hit
