@@ -2,7 +2,8 @@
 
 Shared by ``bench_episode.py`` (one core, stages) and ``bench_throughput.py`` (worker
 processes).  The stages are measured from outside the simulator, by wrapping the camera's
-snapshot (rendering: RGB + depth and label passes of every kept frame and the target frame)
+snapshot and unlabelled capture (rendering: RGB + depth and, on labelled frames, label passes
+of every kept frame and the target frame)
 and ``cablesim.sim.flow_gt.flow_to_target`` (ground truth), so the same script also measures
 older commits of cablesim; physics and control is the rest of the interaction (stepping,
 IK, contact checks, settling, the runner).  Perception is
@@ -117,6 +118,10 @@ def run_interaction(session: Any, segment_mask: np.ndarray, perception: bool = T
     camera = session.camera
     original_snapshot, original_flow = camera.snapshot, flow_gt.flow_to_target
     camera.snapshot = render.wrap(original_snapshot)
+    # the unlabelled frames of capture.truth_every > 1 (older cablesim has no such method)
+    original_unlabelled = getattr(camera, "capture_unlabelled", None)
+    if original_unlabelled is not None:
+        camera.capture_unlabelled = render.wrap(original_unlabelled)
     # the truth provider calls the name it imported: wrap it there too
     flow_gt.flow_to_target = sim_truth.flow_to_target = truth.wrap(original_flow)
     t0, c0 = time.perf_counter(), time.process_time()
@@ -124,6 +129,8 @@ def run_interaction(session: Any, segment_mask: np.ndarray, perception: bool = T
         res = session.interact(segment_mask)
     finally:
         camera.snapshot = original_snapshot
+        if original_unlabelled is not None:
+            camera.capture_unlabelled = original_unlabelled
         flow_gt.flow_to_target = sim_truth.flow_to_target = original_flow
     t1, c1 = time.perf_counter(), time.process_time()
     run = InteractionRun(session.cfg.seed, session.hose, bool(res.success), res.reason)
