@@ -162,6 +162,13 @@ class HoseExploreConfig(Config):
             if value not in choices:
                 raise ConfigError(name, f"must be one of {choices}, got {value!r}")
         check_number("segment_length", self.segment_length, 1e-3, 0.5)
+        every = self.episode.interaction.capture.truth_every
+        if self.flow == "oracle" and every != 1:
+            raise ConfigError(
+                "episode.interaction.capture.truth_every",
+                f"must be 1 with flow 'oracle': it reads every frame's ground-truth flow, "
+                f"got {every}",
+            )
 
     @classmethod
     def _migrate(cls, data: dict[str, Any], path: str) -> dict[str, Any]:

@@ -155,6 +155,12 @@ def test_fast_config() -> None:
     assert fast_config(scene_seed=5, hoses=3).episode.scene.hoses.count == 3
     with pytest.raises(ConfigError, match="bugdet"):
         fast_config(bugdet=1)
+    # the oracle flow reads every frame's ground truth: labelling fewer frames is refused
+    every = "episode.interaction.capture.truth_every"
+    with pytest.raises(ConfigError, match="oracle") as err:
+        fast_config().with_values({every: 4})
+    assert err.value.field == every
+    assert fast_config().with_values({"flow": "dis", every: 4}).flow == "dis"
 
 
 # ---------------------------------------------------------------------- the environment
