@@ -24,6 +24,7 @@ import json
 import statistics
 import sys
 from pathlib import Path
+from typing import Any
 
 import cablesim  # noqa: F401  (selects the headless GL back end)
 from benchmarks import RESULTS, write_results
@@ -69,30 +70,37 @@ def run_variant(assignments: tuple[str, ...], seed: int) -> dict:
 
     session = SimSession.build(episode_config(assignments, seed))
     try:
-        segment = session.pick_start()
-        run, res, seg = run_interaction(session, segment.mask)
-        row = {
-            "seed": seed,
-            "hose": session.hose,
-            "success": run.success,
-            "reason": run.reason,
-            "cpu": run.cpu,
-        }
-        if run.success and seg is not None:
-            ev = session.evaluator()
-            truth = ev.stream_truth(res.stream)
-            row.update(
-                sim_time=run.sim_time,
-                physics_steps=run.physics_steps,
-                ticks=run.ticks,
-                frames=run.frames,
-                gains=run.gains,
-                union=ev.score(seg.mask("union"), truth),
-                intersection=ev.score(seg.mask("intersection"), truth),
-            )
-        return row
+        return scored_interaction(session, seed)
     finally:
         session.close()
+
+
+def scored_interaction(session: Any, seed: int) -> dict:
+    """The row of one interaction of a built ``session`` from its start segment: CPU seconds
+    by stage and, when it succeeded, its frames, gains and the default correlation's union
+    and intersection scores against the target frame's ground truth."""
+    segment = session.pick_start()
+    run, res, seg = run_interaction(session, segment.mask)
+    row = {
+        "seed": seed,
+        "hose": session.hose,
+        "success": run.success,
+        "reason": run.reason,
+        "cpu": run.cpu,
+    }
+    if run.success and seg is not None:
+        ev = session.evaluator()
+        truth = ev.stream_truth(res.stream)
+        row.update(
+            sim_time=run.sim_time,
+            physics_steps=run.physics_steps,
+            ticks=run.ticks,
+            frames=run.frames,
+            gains=run.gains,
+            union=ev.score(seg.mask("union"), truth),
+            intersection=ev.score(seg.mask("intersection"), truth),
+        )
+    return row
 
 
 def main() -> int:

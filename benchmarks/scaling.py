@@ -7,8 +7,8 @@ number of action periods, so that a user can size a study before running it.
 One factor at a time around the default (4 hoses, 640x480, 3 periods).  For every (setting,
 seed), pinned to one core, single-threaded:
 
-- **build**: the scene built from an empty settle cache (a temporary ``$CABLESIM_CACHE``), as
-  a fresh seed is built the first time: layout, settling, robot, camera.  Later runs of the
+- **build**: the scene built without the settle cache (``physics.cache`` off), as a fresh seed
+  is built the first time: layout, settling, robot, camera.  Later runs of the
   same seed and physics read the settled state from the cache (under a second).
 - **interaction**: the episode benchmark's stages (``bench_episode.py``: physics and control,
   rendering, ground truth, the default CPU perception) of one interaction, with the follow
@@ -37,13 +37,8 @@ from pathlib import Path
 
 import cablesim  # noqa: F401  (selects the headless GL back end)
 from benchmarks import RESULTS, write_results
-from benchmarks._interaction import (
-    pin_to_one_core,
-    run_interaction,
-    run_meta,
-    single_thread_environment,
-    uptime,
-)
+from benchmarks._interaction import pin_to_one_core, run_meta, single_thread_environment, uptime
+from benchmarks.episode_variants import scored_interaction
 from cablesim.sweep import episode_config
 
 OUT = RESULTS / "scaling.md"
@@ -83,43 +78,15 @@ DEFAULT = "4 hoses, 640x480, 3 periods"
 
 
 def run_setting(assignments: tuple[str, ...], seed: int) -> dict:
-    """Cold build and one interaction of ``seed`` under ``assignments``."""
+    """Cold build (``physics.cache`` off: the scene settles as a fresh seed's first build
+    does) and one interaction of ``seed`` under ``assignments``."""
     from cablesim.sim.session import SimSession
 
-    with tempfile.TemporaryDirectory(prefix="cablesim-scaling-") as cache:
-        old = os.environ.get("CABLESIM_CACHE")
-        os.environ["CABLESIM_CACHE"] = cache
-        try:
-            c0 = time.process_time()
-            session = SimSession.build(episode_config(assignments, seed))
-            build = time.process_time() - c0
-        finally:
-            if old is None:
-                os.environ.pop("CABLESIM_CACHE", None)
-            else:
-                os.environ["CABLESIM_CACHE"] = old
+    c0 = time.process_time()
+    session = SimSession.build(episode_config((*assignments, "scene.physics.cache=false"), seed))
+    build = time.process_time() - c0
     try:
-        segment = session.pick_start()
-        run, res, seg = run_interaction(session, segment.mask)
-        row = {
-            "seed": seed,
-            "hose": session.hose,
-            "success": run.success,
-            "reason": run.reason,
-            "build_cpu": build,
-            "cpu": run.cpu,
-        }
-        if run.success and seg is not None:
-            ev = session.evaluator()
-            truth = ev.stream_truth(res.stream)
-            row.update(
-                sim_time=run.sim_time,
-                physics_steps=run.physics_steps,
-                frames=run.frames,
-                gains=run.gains,
-                union=ev.score(seg.mask("union"), truth),
-            )
-        return row
+        return scored_interaction(session, seed) | {"build_cpu": build}
     finally:
         session.close()
 
@@ -233,7 +200,7 @@ def report(
         "# Scaling: what an interaction and an exploration cost, by hoses, resolution and periods",
         "",
         "One factor at a time around the default (4 hoses, 640x480, 3 periods), pinned to one "
-        "core, single-threaded.  *Build*: the scene from an empty settle cache (a fresh seed's "
+        "core, single-threaded.  *Build*: the scene built without the settle cache (a fresh seed's "
         "first build; later builds of the same seed and physics read the cache).  "
         "*Interaction*: the episode benchmark's stages (`bench_episode.py`: physics and "
         "control, rendering, ground truth, the default CPU perception).  *Per exploration*: "
