@@ -83,6 +83,7 @@ from cablesim.outcomes import Outcome
 from cablesim.perception.flow import DISFlow
 from cablesim.perception.geometry import line_segment_mask
 from cablesim.perception.pipeline import segment_stream
+from cablesim.policies.config import check_truth_for_flow
 from cablesim.policies.merge import VoteMerger, warp_votes
 from cablesim.sim.config import EPISODE_SHORTCUTS, EpisodeConfig
 from cablesim.sim.session import SimSession
@@ -162,13 +163,7 @@ class HoseExploreConfig(Config):
             if value not in choices:
                 raise ConfigError(name, f"must be one of {choices}, got {value!r}")
         check_number("segment_length", self.segment_length, 1e-3, 0.5)
-        every = self.episode.interaction.capture.truth_every
-        if self.flow == "oracle" and every != 1:
-            raise ConfigError(
-                "episode.interaction.capture.truth_every",
-                f"must be 1 with flow 'oracle': it reads every frame's ground-truth flow, "
-                f"got {every}",
-            )
+        check_truth_for_flow(self.flow, self.episode)
 
     @classmethod
     def _migrate(cls, data: dict[str, Any], path: str) -> dict[str, Any]:

@@ -69,6 +69,17 @@ def explore_episode() -> EpisodeConfig:
     return EpisodeConfig().with_values({"interaction.capture.truth_every": EXPLORE_TRUTH_EVERY})
 
 
+def check_truth_for_flow(flow: str, episode: EpisodeConfig) -> None:
+    """``ConfigError`` naming ``episode.interaction.capture.truth_every`` unless it is 1 where
+    the flow back end ``flow`` reads every frame's ground-truth flow (the oracle)."""
+    every = episode.interaction.capture.truth_every
+    if every != 1 and reads_ground_truth(flow):
+        raise ConfigError(
+            "episode.interaction.capture.truth_every",
+            f"must be 1 with flow {flow!r}: it reads every frame's ground-truth flow, got {every}",
+        )
+
+
 def kind_of(strategy: str) -> str:
     """The interaction kind a strategy runs: ``push`` pokes, the others grasp."""
     return "push" if strategy == "push" else "grasp"
@@ -149,13 +160,7 @@ class ExploreConfig(Config):
                 raise ConfigError(name, str(e)) from None
         if self.merge not in MERGES:
             raise ConfigError("merge", f"must be one of {MERGES}, got {self.merge!r}")
-        every = self.episode.interaction.capture.truth_every
-        if every != 1 and reads_ground_truth(self.flow):
-            raise ConfigError(
-                "episode.interaction.capture.truth_every",
-                f"must be 1 with flow {self.flow!r}: it reads every frame's ground-truth flow, "
-                f"got {every}",
-            )
+        check_truth_for_flow(self.flow, self.episode)
         if not isinstance(self.grasps, int) or self.grasps < 1:
             raise ConfigError("grasps", f"must be an integer >= 1, got {self.grasps!r}")
         if self.max_attempts < self.grasps:
