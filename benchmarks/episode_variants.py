@@ -103,6 +103,20 @@ def scored_interaction(session: Any, seed: int) -> dict:
     return row
 
 
+def check_assignments(
+    ap: argparse.ArgumentParser, named: dict[str, tuple[str, ...]], what: str
+) -> None:
+    """Stop with ``ap.error`` naming the first of ``named`` (name -> ``--set`` assignments of
+    the episode config) whose field or value is bad, before any scene is built."""
+    from cablesim.errors import ConfigError
+
+    for name, assignments in named.items():
+        try:
+            episode_config(assignments)
+        except ConfigError as e:
+            ap.error(f"{what} {name!r}: {e}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[2, 8])
@@ -125,13 +139,7 @@ def main() -> int:
         if not assignments and name not in VARIANTS:
             ap.error(f"--variant {name!r}: not a built-in variant ({', '.join(VARIANTS)})")
         variants[name] = tuple(assignments) if assignments else VARIANTS[name]
-    from cablesim.errors import ConfigError
-
-    for name, assignments in variants.items():  # a bad field stops here, before any scene
-        try:
-            episode_config(assignments)
-        except ConfigError as e:
-            ap.error(f"--variant {name!r}: {e}")
+    check_assignments(ap, variants, "--variant")
 
     core = None if args.no_pin else pin_to_one_core()
     load_start = uptime()

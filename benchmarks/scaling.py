@@ -38,7 +38,7 @@ from pathlib import Path
 import cablesim  # noqa: F401  (selects the headless GL back end)
 from benchmarks import RESULTS, write_results
 from benchmarks._interaction import pin_to_one_core, run_meta, single_thread_environment, uptime
-from benchmarks.episode_variants import scored_interaction
+from benchmarks.episode_variants import check_assignments, scored_interaction
 from cablesim.sweep import episode_config
 
 OUT = RESULTS / "scaling.md"
@@ -147,13 +147,7 @@ def main() -> int:
             name = DEFAULT if i == 0 else label
             settings[name] = assignments
             axis_of.setdefault(name, []).append(axis)
-    from cablesim.errors import ConfigError
-
-    for name, assignments in settings.items():  # a bad field stops here, before any scene
-        try:
-            episode_config(assignments)
-        except ConfigError as e:
-            ap.error(f"setting {name!r}: {e}")
+    check_assignments(ap, settings, "setting")
     core = None if args.no_pin else pin_to_one_core()
     load_start = uptime()
     rows = []
