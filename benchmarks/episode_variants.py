@@ -35,6 +35,7 @@ from benchmarks._interaction import (
     single_thread_environment,
     uptime,
 )
+from cablesim.errors import ConfigError
 from cablesim.sweep import episode_config
 
 OUT = RESULTS / "episode_variants.md"
@@ -108,8 +109,6 @@ def check_assignments(
 ) -> None:
     """Stop with ``ap.error`` naming the first of ``named`` (name -> ``--set`` assignments of
     the episode config) whose field or value is bad, before any scene is built."""
-    from cablesim.errors import ConfigError
-
     for name, assignments in named.items():
         try:
             episode_config(assignments)
