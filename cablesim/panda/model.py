@@ -313,6 +313,7 @@ def panda_spec(prefix: str = "", home_key: bool = True, visual: str = "primitive
             _add_shape(body, f"{p}{link}_g{gi}", kind, where, size, rgba)
         parent = body
     _add_hand(parent, p)
+    _add_finger_stop(spec, p)
     _add_actuators(spec, p)
     if visual == "mesh":
         add_mesh_visuals(spec, p)
@@ -321,6 +322,25 @@ def panda_spec(prefix: str = "", home_key: bool = True, visual: str = "primitive
         key.qpos = list(HOME_QPOS) + [FINGER_RANGE[1]] * 2
         key.ctrl = list(HOME_QPOS) + [MAX_OPENING]
     return spec
+
+
+def _add_finger_stop(spec: mujoco.MjSpec, p: str) -> None:
+    """The two finger pads touch, as on the real hand, where a closing gripper meets nothing.
+
+    The robot's geoms do not collide with each other (``ROBOT_CONTYPE`` & ``ROBOT_CONAFFINITY``
+    is 0), and the fingers' joint limit at 0 is soft: against 70 N the fingers of a hand that
+    closed past a light cable crossed by 9 mm each, trapped it between the crossed pads and
+    could not open again (table rope seed 11194: the rope was dragged along by the retreat and
+    torn).  This contact pair is the mechanical stop; it is inactive (no contact, no
+    constraint row) while the pads are apart, so grasps that close on a cable are unchanged."""
+    pair = spec.add_pair(
+        name=f"{p}finger_stop",
+        geomname1=f"{p}left_finger_pad",
+        geomname2=f"{p}right_finger_pad",
+    )
+    pair.condim = 1
+    pair.solref = [0.004, 1.0]
+    pair.solimp = [0.95, 0.99, 0.001, 0.5, 2.0]
 
 
 def _add_actuators(spec: mujoco.MjSpec, p: str) -> None:
