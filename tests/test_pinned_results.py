@@ -66,11 +66,8 @@ PINNED: dict[str, dict[str, dict[str, str]]] = {
             "votes": "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855",
             "metrics": "d0e8d1c0abb3cace07fd2b65caed99a436337c582a083924ff7cd628512b7fe8",
         },
-        "seed2_push": {
-            "frames": "196396d7586577f4d37280aff823c65f13334822fb4044ab4c256350bdf8d57f",
-            "votes": "3a007d1793b71f27692bf3b09b58970f027ecb5b34fed602d4b402f8d39f129c",
-            "metrics": "aea9968fbab07bb87a469354298b1651d1d577f90ac6f5611df5138486661e93",
-        },
+        # seed2_push: not pinned since 823df36 (the finger pads' contact changed the pushing
+        # hand's closed fingers; no AMD machine to re-pin on): skipped there by name
         "seed3_sampler": {
             "frames": "0b3be2e3335e636b8b34b7ccf4381b81b64eb2feffb5895f78e6dcedf296fb82",
             "votes": "583737dc87ed94a083233e9574af33f55275f6fac30089f3fbdf42739c4e9ad9",
@@ -84,9 +81,9 @@ PINNED: dict[str, dict[str, dict[str, str]]] = {
             "metrics": "a21a111bbf63859caae5b60a4ab08dfdc21e37f0d26bacf2e029c37fb7442612",
         },
         "seed2_push": {
-            "frames": "196396d7586577f4d37280aff823c65f13334822fb4044ab4c256350bdf8d57f",
+            "frames": "2d928c36272547f7cd6b3ce4d0fa8493bce5bcc270faf591dbcc7509466df58b",
             "votes": "3a007d1793b71f27692bf3b09b58970f027ecb5b34fed602d4b402f8d39f129c",
-            "metrics": "850c5696d9f8c7e48053b3e5889ab0b86af1f92ed01849065f1f642436bdb69c",
+            "metrics": "33690a5f6ae1b5754f668e6c9ebb00abffbe948c5ad5302a8fef1a9ac503789f",
         },
         "seed3_sampler": {
             "frames": "cdd6fbecd4b334455045cca04b0a59a605c2969ca8ffa558069178b3910b2e99",
@@ -179,13 +176,16 @@ def case_digests(case: str, tmp: Path) -> dict[str, str]:
 
 
 # ---------------------------------------------------------------------- tests
-def platform_pins() -> dict[str, dict[str, str]]:
-    """This platform's pinned hashes; the test is skipped, naming the platform, where none
-    are pinned (a run repeats bit for bit on one platform, not across CPU vendors)."""
+def platform_pins(case: str | None = None) -> dict[str, dict[str, str]]:
+    """This platform's pinned hashes; the test is skipped, naming the platform (and
+    ``case``), where none are pinned (a run repeats bit for bit on one platform, not across
+    CPU vendors; a case whose behaviour changed stays unpinned on a platform until someone
+    re-pins it on such a machine)."""
     here = float_platform()
-    if here not in PINNED:
+    if here not in PINNED or (case is not None and case not in PINNED[here]):
+        what = here if case is None or here not in PINNED else f"{case} on {here}"
         pytest.skip(
-            f"no pinned hashes for {here!r} (pinned: {', '.join(sorted(PINNED))}); pin them "
+            f"no pinned hashes for {what!r} (pinned: {', '.join(sorted(PINNED))}); pin them "
             "with `python tests/test_pinned_results.py` on such a machine"
         )
     return PINNED[here]
@@ -194,7 +194,7 @@ def platform_pins() -> dict[str, dict[str, str]]:
 @pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_pinned_hashes(case: str, tmp_path: Path) -> None:
-    pins = platform_pins()
+    pins = platform_pins(case)
     got = case_digests(case, tmp_path)
     want = {**pins[case], "config": PINNED_CONFIG[case]}
     changed = {k: (want[k], got[k]) for k in want if got[k] != want[k]}
@@ -208,8 +208,9 @@ def test_pinned_hashes(case: str, tmp_path: Path) -> None:
 def test_pinned_table_covers_every_case() -> None:
     assert set(PINNED_CONFIG) == set(CASES)
     assert all(len(v) == 64 and int(v, 16) >= 0 for v in PINNED_CONFIG.values())
+    assert set(PINNED["x86_64 GenuineIntel"]) == set(CASES)  # where this project runs now
     for platform, table in PINNED.items():
-        assert set(table) == set(CASES), platform
+        assert set(table) <= set(CASES), platform
         for case, digests in table.items():
             assert set(digests) == {"frames", "votes", "metrics"}, (platform, case)
             assert all(len(v) == 64 and int(v, 16) >= 0 for v in digests.values()), case
@@ -219,6 +220,10 @@ def test_a_platform_without_pins_is_skipped_by_name(monkeypatch) -> None:
     monkeypatch.setattr(sys.modules[__name__], "float_platform", lambda: "riscv64 Nobody")
     with pytest.raises(pytest.skip.Exception, match="riscv64 Nobody"):
         platform_pins()
+    monkeypatch.setattr(sys.modules[__name__], "float_platform", lambda: "x86_64 AuthenticAMD")
+    with pytest.raises(pytest.skip.Exception, match="seed2_push on x86_64 AuthenticAMD"):
+        platform_pins("seed2_push")
+    assert platform_pins("seed3_sampler") is PINNED["x86_64 AuthenticAMD"]
 
 
 def test_timings_are_removed_at_any_depth() -> None:

@@ -231,6 +231,50 @@ def test_nothing_held_is_grasp_not_held() -> None:
     assert res.outcome is Outcome.GRASP_NOT_HELD and res.reason.startswith("close: nothing held")
 
 
+class _FirstGraspEmpty(_Arm):
+    """The first close holds nothing; the back-out to its pre-grasp (the first motion at
+    approach speed after it) stops ``short_by`` m off its target; every later grasp holds."""
+
+    def __init__(self, short_by: float) -> None:
+        super().__init__(self._script)
+        self.short_by, self.grasps, self.backed_out = short_by, 0, False
+
+    def grasp(self, width=0.015, force=70.0, speed=0.05, epsilon_inner=0.01, epsilon_outer=0.01):
+        self.grasps += 1
+        return self.grasps > 1
+
+    def _script(self, kind: str, arg) -> MoveResult | None:
+        if kind == "move_to" and arg == APPROACH_SPEED and self.grasps == 1 and not self.backed_out:
+            self.backed_out = True
+            why = "target not reached within tolerance (a hose brushed the open hand)"
+            return MoveResult(False, why, self.short_by, outcome=Outcome.COLLISION)
+        return None
+
+
+@pytest.mark.parametrize("short_by", [0.0044, 0.03])
+def test_a_back_out_that_stops_short_of_the_pregrasp_still_leads_to_the_retry(short_by) -> None:
+    """The first grasp closes on nothing, and backing out to its pre-grasp stops short (the
+    open hand brushes a hose; seed 6371 of the fast counts did this until the finger pads' stop
+    of 823df36 made its first grasp hold).  Within ``hold_check_distance`` (1 cm) the hand is
+    clear of the hose: the neighbouring point is tried, and it holds.  Farther off, the grasp
+    ends as ``grasp_not_held`` with the back-out's reason and no retry."""
+    cfg = GraspConfig(retries=2, approach_speed=APPROACH_SPEED)
+    arm = _FirstGraspEmpty(short_by)
+    centre, axis = np.array([0.5, 0.0, 0.3]), np.array([0.0, 1.0, 0.0])
+    r = prim.grasp_at(arm, centre, axis, cfg, approach=(1.0, 0.0, 0.0))
+    attempts = r.details["attempts"]
+    assert attempts[0]["result"].startswith("close: nothing held")
+    if short_by <= cfg.hold_check_distance:
+        assert r, r.reason
+        assert r.details["retries"] == 1 and len(attempts) == 2
+        assert attempts[0]["back_out_short_by_m"] == short_by
+        assert attempts[1]["result"] == "held"
+        assert abs(attempts[1]["offset_m"]) == pytest.approx(cfg.retry_shift)
+    else:
+        assert not r and r.outcome is Outcome.GRASP_NOT_HELD and arm.grasps == 1
+        assert len(attempts) == 1 and "target not reached" in attempts[0]["back_out"]
+
+
 def test_a_failed_retreat_is_retreat_failed_whatever_the_motion_says() -> None:
     arm = _Arm(
         _fails("move_joints", lambda q: q == tuple(np.round(PARK, 6)), "hit", Outcome.COLLISION)

@@ -108,6 +108,30 @@ def test_an_empty_hand_closed_for_a_thin_wire_holds_nothing(robot: SimPanda):
     assert not robot._pads_on_cable()
 
 
+def test_the_finger_pads_stop_each_other(robot: SimPanda):
+    """The pads touch, as on the real hand: pushed together by 70 N per finger beyond the
+    gripper's own force (a cable squeezed out from between them pushes like this), the closed
+    fingers give way by well under a millimetre; with the pads' contact switched off (its
+    margin at -1 m) the soft joint limit alone lets them cross (-5.7 mm measured), which trapped
+    a rope between the crossed pads (table rope seed 11194).  The hand opens again after it."""
+    w = robot.world
+    m, d = w.model, w.data
+    pair = m.pair("panda/finger_stop").id
+    for stop in (True, False):
+        m.pair_margin[pair] = 0.0 if stop else -1.0
+        assert robot.open()
+        robot.grasp(width=0.0)
+        d.qfrc_applied[robot._finger_dofadr] = -70.0
+        w.step(250)
+        opening = robot.gripper_opening
+        d.qfrc_applied[:] = 0.0
+        if stop:
+            assert -0.0005 < opening < 0.0005
+        else:
+            assert opening < -0.003
+        assert robot.open() and robot.gripper_opening > 0.079
+
+
 def test_equality_grasp_fallback():
     robot = SimPanda(FixtureWorld(), SimPandaConfig(grasp_mode="equality"))
     res, held = approach_and_grasp(robot, _hose_grasp(robot.world))

@@ -437,25 +437,3 @@ def test_a_stretched_hose_is_stepped_by_newton_on_a_dense_jacobian() -> None:
             PhysicsConfig(rescue_strain=0.6)
     finally:
         session.close()
-
-
-@pytest.mark.slow
-def test_a_back_out_that_stops_short_of_the_pregrasp_still_leads_to_the_retry() -> None:
-    """Seed 6371 at 320x240 with 2 periods (benchmarks/results/seeds_fast_6300-6399.md): the
-    first grasp closes on nothing, and backing out to its pre-grasp stops 4.4 mm short (the
-    open hand brushes a hose).  That used to end the interaction (grasp_not_held, no retry);
-    the hand is clear of the hose, so the neighbouring point is tried, and it holds."""
-    cfg = EpisodeConfig.of(seed=6371, width=320, height=240, periods=2)
-    ep = simulate_episode(cfg)
-    try:
-        r = ep.result
-        assert r.success, r.reason
-        attempts = r.details["grasp"]["attempts"]
-        assert r.grasp_retries == 1 and len(attempts) == 2
-        assert attempts[0]["result"].startswith("close: nothing held")
-        assert 0.0 < attempts[0]["back_out_short_by_m"] <= cfg.interaction.grasp.hold_check_distance
-        assert attempts[1]["result"] == "held" and abs(attempts[1]["offset_m"]) == pytest.approx(
-            0.01
-        )
-    finally:
-        ep.close()
