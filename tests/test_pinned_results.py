@@ -94,9 +94,9 @@ PINNED: dict[str, dict[str, dict[str, str]]] = {
 }
 #: case -> SHA-256 of the run's ``config`` (the same on every platform)
 PINNED_CONFIG: dict[str, str] = {
-    "seed1_not_held": "f484fcd6556f35b0f4518208a68f8f97defd6db27ccfa51587c8a8f0a077ca1d",
-    "seed2_push": "d8832bf8a6b9f703f5309e76d7c4de97002476ef36584884ab78ed93f94d3a8a",
-    "seed3_sampler": "4a07df499f493015d0794bbe67d88f18f7995b24ef13c79035fb7c65cfc58718",
+    "seed1_not_held": "d0bfc7e2f1f7011eb6391c8d42e1c0bc8f30d7f2b34d4f561f56b6d8a7dae86f",
+    "seed2_push": "c7564a9d9a2611e391de410c5d6fc05cf3f5cbb9dc775186f3e46dac019b88a5",
+    "seed3_sampler": "d765d4acf754e1384707405f468415a6e443cdcdf1876e59c10d561c7114a9af",
 }
 DEMO_ARGS = ["--seed", "0"]  # the README's demo: cablesim explore --seed 0 --out runs/demo
 DEMO_METRICS = Path(__file__).parent / "data" / "readme_demo_metrics.json"

@@ -42,6 +42,12 @@ JOINT_VELOCITY_LIMITS: np.ndarray = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 
 
 FINGER_RANGE = (0.0, 0.04)  # per finger, metres
 MAX_OPENING = 2 * FINGER_RANGE[1]
+#: MuJoCo's ``solimp`` dmax of the finger pads' and finger bodies' contacts (they have priority
+#: over the cables' own contact parameters): a contact gives way under force in proportion to
+#: 1 - dmax over the mass it presses, so a light cable vertex sinks deep into a pad at 0.99
+#: (docs/cables.md, "Table, rope").  ``RobotConfig.finger_contact_dmax`` overrides it per run
+#: (:func:`cablesim.panda.model.set_finger_contact_dmax`).
+FINGER_CONTACT_DMAX = 0.99
 TCP_OFFSET = 0.1034  # the TCP (between the finger pads) below the hand flange along hand z
 HAND_OFFSET = 0.107  # hand flange below link7 along z
 DEFAULT_GRASP_FORCE = 70.0  # N per finger

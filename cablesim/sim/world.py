@@ -30,7 +30,7 @@ import numpy as np
 from cablesim.cables import CableKind
 from cablesim.episode.surface import SURFACES, Surface
 from cablesim.errors import PhysicsDivergedError
-from cablesim.panda.model import attach_panda, set_arm
+from cablesim.panda.model import attach_panda, set_arm, set_finger_contact_dmax
 from cablesim.panda.visuals import add_mesh_visuals_same_view
 from cablesim.seeding import stream
 from cablesim.sim import assets
@@ -457,6 +457,8 @@ class World:
             model = spec.compile()
             if panda is not None and cfg.robot.visual == "mesh":
                 model = add_mesh_visuals_same_view(spec, model, prefix="panda/")
+            if panda is not None:
+                set_finger_contact_dmax(model, cfg.robot.finger_contact_dmax, prefix="panda/")
         except Exception as e:  # pragma: no cover - names the failing part for the user
             raise PhysicsDivergedError(f"the scene failed to compile: {e}") from e
         hoses = []

@@ -109,9 +109,8 @@ def test_an_empty_hand_closed_for_a_thin_wire_holds_nothing(robot: SimPanda):
 
 
 def test_the_finger_pads_stop_each_other(robot: SimPanda):
-    """The pads touch, as on the real hand: pushed together by 70 N per finger beyond the
-    gripper's own force (a cable squeezed out from between them pushes like this), the closed
-    fingers give way by well under a millimetre; with the pads' contact switched off (its
+    """The pads touch, as on the real hand: pushed together by 70 N per finger on top of the
+    gripper's own closing force, the closed fingers give way by well under a millimetre; with the pads' contact switched off (its
     margin at -1 m) the soft joint limit alone lets them cross (-5.7 mm measured), which trapped
     a rope between the crossed pads (table rope seed 11194).  The hand opens again after it."""
     w = robot.world

@@ -43,6 +43,10 @@ def _cfg(**kw) -> SceneConfig:
         (lambda: SceneConfig(camera=CameraConfig(sphere_stacks=1)), "camera.sphere_stacks"),
         (lambda: SceneConfig(physics=PhysicsConfig(fallback_time=-1.0)), "physics.fallback_time"),
         (lambda: SceneConfig(seed=-1), "seed"),
+        (
+            lambda: SceneConfig(robot=RobotConfig(finger_contact_dmax=1.0)),
+            "robot.finger_contact_dmax",
+        ),
     ],
 )
 def test_impossible_config_names_the_field(make, field: str) -> None:
@@ -50,6 +54,24 @@ def test_impossible_config_names_the_field(make, field: str) -> None:
         make()
     assert e.value.field == field
     assert field in str(e.value)
+
+
+def test_the_fingers_contact_hardness_reaches_only_the_fingers() -> None:
+    """``robot.finger_contact_dmax`` sets the solimp dmax of the four finger geoms (pads and
+    bodies) and nothing else; the default is the model as built, bit for bit."""
+    from cablesim.panda.model import finger_contact_geoms
+    from cablesim.sim.world import World
+
+    built = World.build(SceneConfig(hoses=HoseConfig(count=1)), settle=False).model
+    hard_cfg = SceneConfig(hoses=HoseConfig(count=1), robot=RobotConfig(finger_contact_dmax=0.999))
+    hard = World.build(hard_cfg, settle=False).model
+    fingers = finger_contact_geoms(built)
+    assert len(fingers) == 4
+    np.testing.assert_array_equal(built.geom_solimp[fingers, 1], 0.99)
+    np.testing.assert_array_equal(hard.geom_solimp[fingers, 1], 0.999)
+    others = np.setdiff1d(np.arange(built.ngeom), fingers)
+    np.testing.assert_array_equal(hard.geom_solimp[others], built.geom_solimp[others])
+    np.testing.assert_array_equal(hard.geom_solimp[fingers, [0]], built.geom_solimp[fingers, [0]])
 
 
 def test_config_round_trips_and_prints() -> None:
