@@ -550,7 +550,8 @@ def check_view(field: str, position: tuple[float, ...], look_at: tuple[float, ..
 
 @dataclass(frozen=True)
 class RobotConfig(Config):
-    """Where the Panda stands on the table (its base must stay out of the camera's view)."""
+    """The simulated Panda: where it stands on the table (its base must stay out of the
+    camera's view), where it waits, how it is drawn, and how hard its fingers' contacts are."""
 
     SECTION = "robot"
 
