@@ -44,6 +44,9 @@ _KP = (4500.0, 4500.0, 3500.0, 3500.0, 2000.0, 2000.0, 2000.0)
 _TORQUE = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
 _GRIPPER_KP = 5000.0
 _GRIPPER_KV = 100.0
+#: the fingers' hard contacts (their pads and bodies, and the pads against each other)
+_FINGER_SOLREF = (0.004, 1.0)
+_FINGER_SOLIMP = (0.95, FINGER_CONTACT_DMAX, 0.001, 0.5, 2.0)
 
 WHITE = (0.95, 0.95, 0.95, 1.0)
 OFF_WHITE = (0.90, 0.92, 0.93, 1.0)
@@ -214,8 +217,8 @@ def _add_shape(
     g.mass = 0.0  # inertia comes from the explicit inertials
     if stiff:  # fingers: their contact parameters win over the hose's, and are hard
         g.priority = 1
-        g.solref = [0.004, 1.0]
-        g.solimp = [0.95, FINGER_CONTACT_DMAX, 0.001, 0.5, 2.0]
+        g.solref = list(_FINGER_SOLREF)
+        g.solimp = list(_FINGER_SOLIMP)
 
 
 def finger_contact_geoms(model: mujoco.MjModel, prefix: str = "panda/") -> np.ndarray:
@@ -357,8 +360,8 @@ def _add_finger_stop(spec: mujoco.MjSpec, p: str) -> None:
         geomname2=f"{p}right_finger_pad",
     )
     pair.condim = 1
-    pair.solref = [0.004, 1.0]
-    pair.solimp = [0.95, 0.99, 0.001, 0.5, 2.0]
+    pair.solref = list(_FINGER_SOLREF)
+    pair.solimp = list(_FINGER_SOLIMP)
 
 
 def _add_actuators(spec: mujoco.MjSpec, p: str) -> None:
