@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 
 from cablesim.errors import ConfigError
+from cablesim.panda.description import FINGER_CONTACT_DMAX
 
 RGB = tuple[float, float, float]
 
@@ -57,6 +58,11 @@ class CableKind:
     # fingers or a crossing cable press a light vertex through the table's mat; 1: as built
     # (mass scaling, as in explicit finite elements; no kind uses it: docs/cables.md)
     inertia_scale: float = 1.0
+    # MuJoCo's solimp dmax of the fingers' contacts (pads and finger bodies; theirs win over
+    # the cable's own) in a scene with this kind, the largest of the scene's kinds: a contact
+    # gives way under force by about (1 - dmax) times force over the pressed mass, so a light
+    # vertex sinks into a soft pad and creeps out under it (docs/cables.md, "Table, rope")
+    grip_dmax: float = FINGER_CONTACT_DMAX
 
     def bending_stiffness(self) -> tuple[float, float]:
         """EI range (N m^2) the ``young`` range gives at ``radius``."""
@@ -73,6 +79,7 @@ class CableKind:
             f"damping {self.damping:g} N s/m  segment {1e3 * self.segment_length:.0f} mm  "
             f"{self.pattern}  {len(self.colors)} colours"
             + (f"  inertia x{self.inertia_scale:g}" if self.inertia_scale != 1 else "")
+            + (f"  grip dmax {self.grip_dmax:g}" if self.grip_dmax != FINGER_CONTACT_DMAX else "")
             + f": {self.summary}"
         )
 
@@ -209,6 +216,9 @@ ROPE = CableKind(
     "three-strand rope about 3.5 diameters",
     pattern="twisted",
     pattern_period=0.035,
+    # the pads' contact 10x stiffer than the hand's default: at 0.99 a 65 g/m rope lying on
+    # the table creeps down out of the pads at the stroke reversals (docs/cables.md)
+    grip_dmax=0.999,
 )
 
 #: Every kind, by name (the registry ``--cable`` and ``hoses.kind`` choose from).

@@ -45,7 +45,8 @@ MAX_OPENING = 2 * FINGER_RANGE[1]
 #: MuJoCo's ``solimp`` dmax of the finger pads' and finger bodies' contacts (they have priority
 #: over the cables' own contact parameters): a contact gives way under force in proportion to
 #: 1 - dmax over the mass it presses, so a light cable vertex sinks deep into a pad at 0.99
-#: (docs/cables.md, "Table, rope").  ``RobotConfig.finger_contact_dmax`` overrides it per run
+#: (docs/cables.md, "Table, rope").  A cable kind asks for its own (``CableKind.grip_dmax``, the
+#: rope 0.999; ``hoses.grip_dmax`` overrides it), which the scene's build sets
 #: (:func:`cablesim.panda.model.set_finger_contact_dmax`).
 FINGER_CONTACT_DMAX = 0.99
 TCP_OFFSET = 0.1034  # the TCP (between the finger pads) below the hand flange along hand z

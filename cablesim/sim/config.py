@@ -18,6 +18,7 @@ run in it (:mod:`cablesim.seeding`); ``EpisodeConfig.seed`` reads it.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -25,6 +26,7 @@ from typing import Any
 from cablesim.cables import DEFAULT_KIND, CableKind, cable_kind, check_pattern
 from cablesim.config import (
     Config,
+    ConfigMigrationWarning,
     check_number,
     check_positive,
     check_range,
@@ -35,7 +37,6 @@ from cablesim.config import (
 from cablesim.episode.config import InteractionConfig
 from cablesim.errors import ConfigError
 from cablesim.panda.description import (
-    FINGER_CONTACT_DMAX,
     JOINT_LIMITS,
     PARK_QPOS,
     check_visual,
@@ -223,6 +224,7 @@ class HoseConfig(Config):
     mass_per_metre: float | None = None  # kg/m
     damping: float | None = None  # N s/m on each vertex dof (air drag, internal losses)
     inertia_scale: float | None = None  # vertex inertia x this, weight unchanged
+    grip_dmax: float | None = None  # the fingers' contact solimp dmax (the largest kind's)
     both_ends_probability: float = 0.75  # else attached at one end and hanging free
     colors: tuple[tuple[float, float, float], ...] | None = None
     color_jitter: float | None = None
@@ -250,6 +252,12 @@ class HoseConfig(Config):
     def max_diameter(self) -> float:
         """The thickest cable's diameter (m): what a gripper closing on any of them needs."""
         return max(2 * self.cable(i).radius for i in range(self.count))
+
+    def finger_contact_dmax(self) -> float:
+        """The fingers' contact hardness (MuJoCo solimp dmax) for these cables: the largest
+        ``grip_dmax`` of the ``count`` cables' kinds, so a scene that mixes kinds grips each
+        as hard as its hardest-gripped kind asks."""
+        return max(self.cable(i).grip_dmax for i in range(self.count))
 
     def cable(self, i: int) -> CableKind:
         """The parameters cable ``i`` is built with: its kind's, with this config's overrides."""
@@ -338,6 +346,7 @@ class HoseConfig(Config):
         check_positive(name("friction"), c.friction, allow_zero=True)
         check_pattern(c.pattern, name("pattern"))
         check_positive(name("pattern_period"), c.pattern_period)
+        check_number(name("grip_dmax"), c.grip_dmax, 0.95, 0.9999)
         if c.pattern_period < 2 * c.radius:
             raise ConfigError(
                 name("pattern_period"),
@@ -357,6 +366,7 @@ _CABLE_OVERRIDES = (
     "mass_per_metre",
     "damping",
     "inertia_scale",
+    "grip_dmax",
     "colors",
     "color_jitter",
     "friction",
@@ -551,7 +561,8 @@ def check_view(field: str, position: tuple[float, ...], look_at: tuple[float, ..
 @dataclass(frozen=True)
 class RobotConfig(Config):
     """The simulated Panda: where it stands on the table (its base must stay out of the
-    camera's view), where it waits, how it is drawn, and how hard its fingers' contacts are."""
+    camera's view), where it waits and how it is drawn (how hard its fingers' contacts are is
+    the cables' ``hoses.grip_dmax``)."""
 
     SECTION = "robot"
 
@@ -570,12 +581,6 @@ class RobotConfig(Config):
     # at this base position it shows at the right edge of the default camera in every park
     # pose, so "mesh" adds a static robot strip to every frame (~950 px at 640x480)
     visual: str = "primitive"
-    # MuJoCo's solimp dmax of the fingers' contacts (pads and finger bodies): a contact gives
-    # way under force by about (1 - dmax) times force over the pressed mass, so a light cable
-    # vertex sinks deep into a pad.  The default 0.99 is the model as built; 0.999 held the
-    # table rope on development seeds that lost it at 0.99 (docs/cables.md, "Table, rope"),
-    # not counted yet.  Changes every grasp.
-    finger_contact_dmax: float = FINGER_CONTACT_DMAX
 
     def _validate(self) -> None:
         if len(self.base_position) != 3:
@@ -590,7 +595,6 @@ class RobotConfig(Config):
         if self.hand_board and not self.enabled:
             raise ConfigError("robot.hand_board", "a board in the hand needs the robot (enabled)")
         check_visual(self.visual, "robot.visual")
-        check_number("robot.finger_contact_dmax", self.finger_contact_dmax, 0.95, 0.9999)
 
 
 @dataclass(frozen=True)
@@ -721,6 +725,33 @@ class SceneConfig(Config):
     physics: PhysicsConfig = field(default_factory=PhysicsConfig)
     light: LightConfig = field(default_factory=LightConfig)
 
+    MOVED = {"robot.finger_contact_dmax": "hoses.grip_dmax"}  # where ``--set`` finds it
+
+    @classmethod
+    def _migrate(cls, data: dict[str, Any], path: str) -> dict[str, Any]:
+        """Earlier layout (2026-12-05): the fingers' contact hardness was the robot's
+        ``robot.finger_contact_dmax``; it is the cable kinds' ``hoses.grip_dmax`` now (an
+        override for every kind, so the old run's value grips every cable as it did)."""
+        robot = data.get("robot")
+        if not isinstance(robot, dict) or "finger_contact_dmax" not in robot:
+            return data
+        robot = dict(robot)
+        value = robot.pop("finger_contact_dmax")
+        hoses = data.get("hoses", {})
+        if not isinstance(hoses, dict):
+            raise ConfigError(f"{path}hoses", f"expected a mapping, got {hoses!r}")
+        hoses = dict(hoses)
+        old, new = f"{path}robot.finger_contact_dmax", f"{path}hoses.grip_dmax"
+        if hoses.get("grip_dmax") not in (None, value):
+            raise ConfigError(
+                old,
+                f"moved to {new}, and the file gives both ({value!r} and "
+                f"{hoses['grip_dmax']!r}): keep one of them",
+            )
+        hoses["grip_dmax"] = value
+        warnings.warn(ConfigMigrationWarning(f"{old} moved to {new} ({value!r})"), stacklevel=3)
+        return {**data, "robot": robot, "hoses": hoses}
+
     def _validate(self) -> None:
         if not isinstance(self.seed, int) or self.seed < 0:
             raise ConfigError("seed", f"must be a non-negative integer, got {self.seed!r}")
@@ -843,7 +874,10 @@ class EpisodeConfig(Config):
     (:data:`EPISODE_SHORTCUTS`); ``cfg.seed`` reads ``cfg.scene.seed``."""
 
     SHORTCUTS = EPISODE_SHORTCUTS
-    MOVED = {"seed": "scene.seed"}
+    MOVED = {
+        "seed": "scene.seed",
+        "scene.robot.finger_contact_dmax": "scene.hoses.grip_dmax",
+    }
 
     hose: int | None = None  # None: drawn from the seed's ``episode`` stream
     scene: SceneConfig = field(default_factory=SceneConfig)

@@ -458,7 +458,7 @@ class World:
             if panda is not None and cfg.robot.visual == "mesh":
                 model = add_mesh_visuals_same_view(spec, model, prefix="panda/")
             if panda is not None:
-                set_finger_contact_dmax(model, cfg.robot.finger_contact_dmax, prefix="panda/")
+                set_finger_contact_dmax(model, cfg.hoses.finger_contact_dmax(), prefix="panda/")
         except Exception as e:  # pragma: no cover - names the failing part for the user
             raise PhysicsDivergedError(f"the scene failed to compile: {e}") from e
         hoses = []

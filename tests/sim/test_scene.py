@@ -43,10 +43,7 @@ def _cfg(**kw) -> SceneConfig:
         (lambda: SceneConfig(camera=CameraConfig(sphere_stacks=1)), "camera.sphere_stacks"),
         (lambda: SceneConfig(physics=PhysicsConfig(fallback_time=-1.0)), "physics.fallback_time"),
         (lambda: SceneConfig(seed=-1), "seed"),
-        (
-            lambda: SceneConfig(robot=RobotConfig(finger_contact_dmax=1.0)),
-            "robot.finger_contact_dmax",
-        ),
+        (lambda: SceneConfig(hoses=HoseConfig(grip_dmax=1.0)), "hoses.grip_dmax"),
     ],
 )
 def test_impossible_config_names_the_field(make, field: str) -> None:
@@ -56,22 +53,46 @@ def test_impossible_config_names_the_field(make, field: str) -> None:
     assert field in str(e.value)
 
 
-def test_the_fingers_contact_hardness_reaches_only_the_fingers() -> None:
-    """``robot.finger_contact_dmax`` sets the solimp dmax of the four finger geoms (pads and
-    bodies) and nothing else; the default is the model as built, bit for bit."""
+def test_the_fingers_contact_hardness_is_the_kinds_and_reaches_only_the_fingers() -> None:
+    """A kind's ``grip_dmax`` (the rope's 0.999) sets the solimp dmax of the four finger geoms
+    (pads and bodies) and nothing else; a scene that mixes kinds takes the largest, and
+    ``hoses.grip_dmax`` overrides every kind; the hand's default is the model as built."""
     from cablesim.panda.model import finger_contact_geoms
     from cablesim.sim.world import World
 
-    built = World.build(SceneConfig(hoses=HoseConfig(count=1)), settle=False).model
-    hard_cfg = SceneConfig(hoses=HoseConfig(count=1), robot=RobotConfig(finger_contact_dmax=0.999))
-    hard = World.build(hard_cfg, settle=False).model
+    def model(hoses: HoseConfig):  # type: ignore[no-untyped-def]
+        return World.build(SceneConfig(hoses=hoses), settle=False).model
+
+    built = model(HoseConfig(count=1))
+    rope = model(HoseConfig(count=1, kind="rope"))
     fingers = finger_contact_geoms(built)
     assert len(fingers) == 4
     np.testing.assert_array_equal(built.geom_solimp[fingers, 1], 0.99)
-    np.testing.assert_array_equal(hard.geom_solimp[fingers, 1], 0.999)
+    np.testing.assert_array_equal(rope.geom_solimp[fingers, 1], 0.999)
     others = np.setdiff1d(np.arange(built.ngeom), fingers)
-    np.testing.assert_array_equal(hard.geom_solimp[others], built.geom_solimp[others])
-    np.testing.assert_array_equal(hard.geom_solimp[fingers, [0]], built.geom_solimp[fingers, [0]])
+    np.testing.assert_array_equal(rope.geom_solimp[others], built.geom_solimp[others])
+    np.testing.assert_array_equal(rope.geom_solimp[fingers, [0]], built.geom_solimp[fingers, [0]])
+    assert HoseConfig(kinds=("garden_hose", "rope")).finger_contact_dmax() == 0.999
+    assert HoseConfig(count=1, kinds=("garden_hose", "rope")).finger_contact_dmax() == 0.99
+    soft_rope = model(HoseConfig(count=1, kind="rope", grip_dmax=0.99))
+    np.testing.assert_array_equal(soft_rope.geom_solimp[fingers, 1], 0.99)
+
+
+def test_a_config_of_the_robots_finger_hardness_loads_as_the_cables() -> None:
+    """``robot.finger_contact_dmax`` (2026-12-05's layout) loads as ``hoses.grip_dmax``, with
+    a migration warning, so the run grips every cable as it did; both given and different is
+    the project's error naming the old field."""
+    from cablesim.config import ConfigMigrationWarning
+
+    data = SceneConfig(hoses=HoseConfig(kind="rope")).to_dict()
+    data["robot"]["finger_contact_dmax"] = 0.99
+    with pytest.warns(ConfigMigrationWarning, match="robot.finger_contact_dmax moved"):
+        old = SceneConfig.from_dict(data)
+    assert old.hoses.grip_dmax == 0.99 and old.hoses.finger_contact_dmax() == 0.99
+    data["hoses"]["grip_dmax"] = 0.995
+    with pytest.raises(ConfigError) as e:
+        SceneConfig.from_dict(data)
+    assert e.value.field == "robot.finger_contact_dmax"
 
 
 def test_config_round_trips_and_prints() -> None:
