@@ -94,9 +94,9 @@ PINNED: dict[str, dict[str, dict[str, str]]] = {
 }
 #: case -> SHA-256 of the run's ``config`` (the same on every platform)
 PINNED_CONFIG: dict[str, str] = {
-    "seed1_not_held": "203e2893ffe10aa12e8cf169f47833bec7ac4b8e9333663b87108e4cb7cc161d",
-    "seed2_push": "99524e1ff282959697df56ef19269846c7a33301273e674575c567d9eb74e52b",
-    "seed3_sampler": "be44ac356f155b17b3accc141f60ce37d8e8a7dd1299a61d96d1d51f924150e9",
+    "seed1_not_held": "c7bd0fa815b520b5f4bffe9161b1802104c162dea56ec5fd44a029e118453e8b",
+    "seed2_push": "9d43580bc69aada0e8aea9972611e77116d6319d9054eda6db3c8b13a51be40b",
+    "seed3_sampler": "68aeba542cf72bae68e206435ed1f6bf86a907e0161321e3d3473719561822f7",
 }
 DEMO_ARGS = ["--seed", "0"]  # the README's demo: cablesim explore --seed 0 --out runs/demo
 DEMO_METRICS = Path(__file__).parent / "data" / "readme_demo_metrics.json"

@@ -330,6 +330,41 @@ def test_a_rescue_on_the_table_ends_once_the_stretch_is_gone() -> None:
             assert (m.opt.solver, m.opt.jacobian) == (w._solver, w._jacobian)
 
 
+def test_a_hose_sunk_into_the_mat_starts_a_rescue(table_world) -> None:
+    """``physics.rescue_depth``: a step that leaves a hose deeper than that in the mat is
+    redone by the dense Newton, as a stretched edge is (the sparse Newton can let a hose sink
+    through the mat while it reports convergence, table rope seed 11326).  A settled scene
+    starts none; 0 turns the check off; the board's default is off."""
+    import mujoco
+
+    assert table().rescue_depth() == 0.003 and SceneConfig().rescue_depth() == 0.0
+    w = table_world
+    m, d = w.model, w.data
+    state = w.get_state()
+    try:
+        w.reset()
+        w.step(5)
+        assert w.solver_rescues == 0 and not w._sinking()  # cables at rest: no rescue
+        h = w.hoses[0]
+        k = h.n_vertices // 2  # a vertex in the middle, lying on the mat
+        body = int(h.vertex_bodies[k])
+        joints = range(m.body_jntadr[body], m.body_jntadr[body] + m.body_jntnum[body])
+        z = next(j for j in joints if np.allclose(m.jnt_axis[j], (0, 0, 1)))
+        for depth, rescues in ((w.cfg.rescue_depth(), 1), (0.0, 0)):
+            w.reset()
+            w._rescue_depth = depth
+            d.qpos[m.jnt_qposadr[z]] -= 0.008  # 8 mm into the mat
+            mujoco.mj_forward(m, d)
+            assert w.hose_stretch().max() < w.cfg.physics.rescue_strain  # not stretched
+            w.step(1)
+            assert w.solver_rescues == rescues
+    finally:
+        w._rescue_depth = w.cfg.rescue_depth()
+        w.set_state(state)
+        w.reset()
+        w.set_state(state)
+
+
 def test_slack_to_plugged_ends_is_arc_length_less_the_straight_distance() -> None:
     from cablesim.sim.picker import slack_to_plugged_ends
 
