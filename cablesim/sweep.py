@@ -222,8 +222,8 @@ def markdown(rows: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         f"- outcomes: {outcomes}",
         f"- grasp retries: {retries}",
         f"- scene re-draws (resamples): {resamples}; turned-down draws: {turned}",
-        f"- seeds where a stretched hose was stepped by the dense Newton (`physics."
-        f"rescue_strain`): {s['seeds_with_rescues']}",
+        "- seeds where a stretched or sunk hose was stepped by the dense Newton (`physics."
+        f"rescue_strain`, `physics.rescue_depth`): {s['seeds_with_rescues']}",
         "",
         "## Per seed",
         "",

@@ -431,8 +431,8 @@ class World:
         self._rescue_steps = 0
         self._rescues = 0
         self._rescue_release = cfg.rescue_release()  # ends a rescue early (0: never)
-        # a hose sunk this deep into the board, the table or its mat starts a rescue too (see
-        # _advance); 0: never.  Not the sockets and couplings, which hold the hoses' ends
+        # a hose sunk this deep into the board, the table or its mat (not a socket or a
+        # coupling) starts a rescue too (see _advance); 0: never
         self._rescue_depth = cfg.rescue_depth()
         self._surface_geom = np.zeros(model.ngeom, bool)
         for name in SURFACE_GEOMS:
@@ -562,7 +562,9 @@ class World:
 
         With ``physics.rescue_strain`` > 0: when a step leaves a hose edge stretched by more
         than that (a taut hose held by the arm, where CG at its iteration cap and the sparse
-        Newton both stop short of the solution and the hose can run away), the step is redone
+        Newton both stop short of the solution and the hose can run away), or with
+        ``physics.rescue_depth`` > 0 leaves a hose sunk deeper than that into the table, the
+        board or the mat (see :meth:`_sinking`), the step is redone
         with Newton on a dense Jacobian, which converges in a few iterations there, and the
         dense Newton goes on for ``physics.rescue_time`` (16 ms per step instead of ~2), or
         until a dense step leaves every edge stretched by less than the resolved
@@ -657,8 +659,8 @@ class World:
 
     @property
     def solver_rescues(self) -> int:
-        """How often a stretched hose switched the solver to Newton on a dense Jacobian since
-        the last reset (see ``_advance``)."""
+        """How often a stretched or sunk hose switched the solver to Newton on a dense
+        Jacobian since the last reset (see ``_advance``)."""
         return self._rescues
 
     @property
