@@ -74,6 +74,10 @@ StepHook = Callable[["World"], None]
 #: The geoms the hoses lie or hang on (the scene XML's names): a hose sunk deep into one of
 #: them starts a rescue (``physics.rescue_depth``)
 SURFACE_GEOMS = ("table", "mat", "board")
+#: m/s: a hose deeper than ``physics.rescue_depth`` in a surface that goes deeper faster than
+#: this is sinking through it (0.4 mm per 4 ms step; on seed 11326 the sinking vertices went
+#: 0.6-1.5 mm deeper per step, a resting cable's depth changes by microns)
+SINK_SPEED = 0.1
 
 
 @dataclass(frozen=True)
@@ -439,6 +443,7 @@ class World:
             gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
             if gid >= 0:
                 self._surface_geom[gid] = True
+        self._last_depth = 0.0  # the deepest a hose lay in a surface after the last step
         self._step_state = np.empty(mujoco.mj_stateSize(model, _STATE))
         self.before_step: list[StepHook] = []
         self.after_step: list[StepHook] = []
@@ -577,7 +582,8 @@ class World:
             if not rescue:
                 return None
             strain = self.hose_stretch()
-            if not (strain.max() > self.cfg.physics.rescue_strain or self._sinking()):
+            sinking = self._sinking()
+            if not (strain.max() > self.cfg.physics.rescue_strain or sinking):
                 return strain
             # redo the step from the saved state, and go on, with the dense Newton
             mujoco.mj_setState(m, d, self._step_state, _STATE)
@@ -589,35 +595,43 @@ class World:
         mujoco.mj_step(m, d)
         self._rescue_steps -= 1
         release = self._rescue_release
-        if (
-            release > 0
-            and self._rescue_steps > 0
-            and self.hose_stretch().max() < release
-            and not self._sinking()
-        ):
-            self._rescue_steps = 0
+        sinking = self._sinking()
+        if release > 0 and self._rescue_steps > 0 and self.hose_stretch().max() < release:
+            if not sinking:
+                self._rescue_steps = 0
         if self._rescue_steps == 0:
             m.opt.solver, m.opt.jacobian = self._solver, self._jacobian
         return None
 
-    def _sinking(self) -> bool:
-        """Whether a hose penetrates a surface (the board, the table, its mat) deeper than
-        ``physics.rescue_depth``.  Where the sparse Newton fails on a hose lying on the table
-        it reports convergence in one or two iterations while a few vertices accelerate
-        through the mat at ~13 m/s^2 (table rope seed 11326: 24 mm deep in 50 ms); the edge
-        strain shows it only once the hose is torn, the depth 9 steps earlier."""
+    def _surface_depth(self) -> float:
+        """How deep (m) the deepest hose lies in a surface (the board, the table, its mat)
+        now; 0 where none touches one."""
         d = self.data
-        if self._rescue_depth <= 0 or d.ncon == 0:
-            return False
+        if d.ncon == 0:
+            return 0.0
         con = d.contact
-        deep = con.dist < -self._rescue_depth
-        if not deep.any():
-            return False
-        flex, geom = con.flex[deep], con.geom[deep]
+        flex, geom = con.flex, con.geom
         hose0, hose1 = flex[:, 0] >= 0, flex[:, 1] >= 0
         other = np.where(hose0, geom[:, 1], geom[:, 0])
-        one_hose = hose0 ^ hose1
-        return bool((one_hose & (other >= 0) & self._surface_geom[np.maximum(other, 0)]).any())
+        on = (hose0 ^ hose1) & (other >= 0) & self._surface_geom[np.maximum(other, 0)]
+        return max(0.0, -float(con.dist[on].min())) if on.any() else 0.0
+
+    def _sinking(self) -> bool:
+        """Whether a hose lies deeper than ``physics.rescue_depth`` in a surface and went
+        deeper in the last step, faster than :data:`SINK_SPEED`.  Where the sparse Newton
+        fails on a hose lying on the table it reports convergence in one or two iterations
+        while a few vertices accelerate through the mat at ~13 m/s^2 (table rope seed 11326:
+        24 mm deep in 50 ms; the edge strain shows it only once the hose is torn, the depth 9
+        steps earlier).  A hose that lies deep and stays there is not sinking: a plugged rope
+        end rests 3.2 mm deep in the mat beside its socket (table rope seed 11420), and a
+        rescue there would run the dense Newton for the whole interaction.  Called once per
+        step: it keeps the depth for the next call."""
+        if self._rescue_depth <= 0:
+            return False
+        depth = self._surface_depth()
+        before, self._last_depth = self._last_depth, depth
+        sunk = depth - before > SINK_SPEED * self.model.opt.timestep
+        return depth > self._rescue_depth and sunk
 
     def _plain_step(self) -> None:
         """One step with the configured solver and the CG fallback (state saved by the caller
@@ -733,6 +747,7 @@ class World:
             mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_setState(self.model, self.data, state, spec)
         mujoco.mj_forward(self.model, self.data)
+        self._last_depth = self._surface_depth() if self._rescue_depth > 0 else 0.0
 
     def reset(self) -> None:
         """Back to the settled state (bit for bit)."""
@@ -741,6 +756,7 @@ class World:
         self._rescue_steps = self._rescues = 0
         if self._settled_state is None:
             self._set_start_shapes()
+            self._last_depth = self._surface_depth() if self._rescue_depth > 0 else 0.0
         else:
             self.set_state(self._settled_state)
         self._warn_counts = self.data.warning.number[_WARNING_INDEX]

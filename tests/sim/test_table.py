@@ -331,8 +331,9 @@ def test_a_rescue_on_the_table_ends_once_the_stretch_is_gone() -> None:
 
 
 def test_a_hose_sunk_into_the_mat_starts_a_rescue(table_world) -> None:
-    """``physics.rescue_depth``: a step that leaves a hose deeper than that in the mat is
-    redone by the dense Newton, as a stretched edge is (the sparse Newton can let a hose sink
+    """``physics.rescue_depth``: a step that leaves a hose deeper than that in the mat, and
+    deeper than a step before by more than ``SINK_SPEED``, is redone by the dense Newton, as
+    a stretched edge is (the sparse Newton can let a hose sink
     through the mat while it reports convergence, table rope seed 11326).  A settled scene
     starts none; 0 turns the check off; the board's default is off."""
     import mujoco
@@ -350,10 +351,15 @@ def test_a_hose_sunk_into_the_mat_starts_a_rescue(table_world) -> None:
         body = int(h.vertex_bodies[k])
         joints = range(m.body_jntadr[body], m.body_jntadr[body] + m.body_jntnum[body])
         z = next(j for j in joints if np.allclose(m.jnt_axis[j], (0, 0, 1)))
+        w.reset()
+        d.qpos[m.jnt_qposadr[z]] -= 0.008  # 8 mm into the mat
+        mujoco.mj_forward(m, d)
+        assert w._sinking()  # 8 mm deep, from resting on the mat: sinking
+        assert not w._sinking()  # as deep as a step before: lying deep is not sinking
         for depth, rescues in ((w.cfg.rescue_depth(), 1), (0.0, 0)):
             w.reset()
             w._rescue_depth = depth
-            d.qpos[m.jnt_qposadr[z]] -= 0.008  # 8 mm into the mat
+            d.qpos[m.jnt_qposadr[z]] -= 0.008
             mujoco.mj_forward(m, d)
             assert w.hose_stretch().max() < w.cfg.physics.rescue_strain  # not stretched
             w.step(1)
