@@ -671,16 +671,19 @@ class PhysicsConfig(Config):
     # ``SceneConfig.rescue_release()``).  Must lie below ``rescue_strain``.
     rescue_release: float | None = None
     # m: a step that leaves a hose sunk deeper than this into the board, the table or its
-    # mat starts a rescue as a stretched edge does (and a rescue ends early only once no hose
-    # is that deep); 0 turns it off; None: the surface's (:data:`SURFACE_RESCUE_DEPTH`,
-    # ``SceneConfig.rescue_depth()``: the table's 3 mm, off on the board).  The sparse Newton
-    # can fail on a cable lying on the table while it reports convergence in one or two
-    # iterations: a few vertices accelerate through the mat, and an edge stretches past
-    # ``rescue_strain`` only once they are 18 mm deep (table rope seed 11326, then torn), or
-    # the cable ends up inside the table unnoticed (table hose seed 11301).  Measured over
-    # whole interactions on the table (Intel, seed 11301 of each kind): the thin wire at most
-    # 2.1 mm deep; above 3 mm only in such sinking (the rope and the electrical cable 6-7
-    # steps, the hose through the table) (docs/cables.md, "Cables sinking into the table")
+    # mat, and deeper than a step before by more than ``world.SINK_SPEED`` (0.1 m/s), starts a
+    # rescue as a stretched edge does (and a rescue ends early only once nothing is sinking);
+    # a cable that lies deep and stays there is left alone (a plugged rope end rests 3.2 mm
+    # deep beside its socket, table rope seed 11420).  0 turns it off; None: the surface's
+    # (:data:`SURFACE_RESCUE_DEPTH`, ``SceneConfig.rescue_depth()``: the table's 3 mm, off on
+    # the board).  The sparse Newton can fail on a cable lying on the table while it reports
+    # convergence in one or two iterations: a few vertices accelerate through the mat, and an
+    # edge stretches past ``rescue_strain`` only once they are 18 mm deep (table rope seed
+    # 11326, then torn), or the cable ends up inside the table unnoticed (table hose seed
+    # 11301).  Over whole interactions on the table (Intel, seed 11301 of each kind) the thin
+    # wire lay at most 2.1 mm deep, the rope and the electrical cable passed 3 mm for 6-7 steps
+    # (to 9.9 and 4.9 mm) and the hose went through the table (docs/cables.md, "Cables sinking
+    # into the table")
     rescue_depth: float | None = None
     # MuJoCo's sleeping islands: > 0 turns them on with this velocity tolerance (m/s on the
     # hoses' vertex joints, rad/s on hinges).  An island (bodies joined by constraints:
