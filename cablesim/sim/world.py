@@ -595,10 +595,14 @@ class World:
         mujoco.mj_step(m, d)
         self._rescue_steps -= 1
         release = self._rescue_release
-        sinking = self._sinking()
-        if release > 0 and self._rescue_steps > 0 and self.hose_stretch().max() < release:
-            if not sinking:
-                self._rescue_steps = 0
+        sinking = self._sinking()  # every step: it keeps the depth for the next one
+        if (
+            release > 0
+            and self._rescue_steps > 0
+            and not sinking
+            and self.hose_stretch().max() < release
+        ):
+            self._rescue_steps = 0
         if self._rescue_steps == 0:
             m.opt.solver, m.opt.jacobian = self._solver, self._jacobian
         return None
@@ -615,6 +619,11 @@ class World:
         other = np.where(hose0, geom[:, 1], geom[:, 0])
         on = (hose0 ^ hose1) & (other >= 0) & self._surface_geom[np.maximum(other, 0)]
         return max(0.0, -float(con.dist[on].min())) if on.any() else 0.0
+
+    def _remember_depth(self) -> None:
+        """Take the current state's surface depth as the last step's (after a state is set,
+        so that a hose lying deep in it is not taken for one sinking)."""
+        self._last_depth = self._surface_depth() if self._rescue_depth > 0 else 0.0
 
     def _sinking(self) -> bool:
         """Whether a hose lies deeper than ``physics.rescue_depth`` in a surface and went
@@ -747,7 +756,7 @@ class World:
             mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_setState(self.model, self.data, state, spec)
         mujoco.mj_forward(self.model, self.data)
-        self._last_depth = self._surface_depth() if self._rescue_depth > 0 else 0.0
+        self._remember_depth()
 
     def reset(self) -> None:
         """Back to the settled state (bit for bit)."""
@@ -756,7 +765,7 @@ class World:
         self._rescue_steps = self._rescues = 0
         if self._settled_state is None:
             self._set_start_shapes()
-            self._last_depth = self._surface_depth() if self._rescue_depth > 0 else 0.0
+            self._remember_depth()
         else:
             self.set_state(self._settled_state)
         self._warn_counts = self.data.warning.number[_WARNING_INDEX]
