@@ -33,6 +33,7 @@ STREAMS: tuple[str, ...] = (
     "dataset",  # a dataset scene's randomised background, hoses, light and camera
     "dataset_kinds",  # a dataset scene's cable kinds, one per cable
     "dataset_patterns",  # a dataset scene's cable surface patterns, one per cable
+    "dataset_motion",  # a MovingCables clip's action direction and amplitude
 )
 
 

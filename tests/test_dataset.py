@@ -55,6 +55,41 @@ def test_randomised_scenes_depend_on_the_seed_only():
         Randomization(backgrounds=("lava",))
 
 
+def test_a_clips_hand_motion_is_drawn_from_its_seed():
+    from cablesim.dataset.generate import clip_motion
+
+    motion = {"directions": ["along", "across"], "amplitude": [0.02, 0.05]}
+    draws = [clip_motion(s, motion) for s in range(200)]
+    assert draws == [clip_motion(s, motion) for s in range(200)]  # the seed alone decides
+    assert {d for d, _ in draws} == {"along", "across"}
+    amps = np.array([a for _, a in draws])
+    assert amps.min() >= 0.02 and amps.max() <= 0.05 and amps.std() > 0.005
+    assert clip_motion(5, {"directions": ["across"], "amplitude": [0.03, 0.03]}) == ("across", 0.03)
+    assert clip_motion(5, None) == ("along", 0.02)  # jobs written before the draw existed
+    jobs = dataset_jobs("movingcables", 0, 2, Path("x"), "test", TINY)
+    assert jobs[0].params["motion"] == motion  # the default: along or across, 2-5 cm
+    assert "motion" not in dataset_jobs("mcor", 0, 1, Path("x"), "test", TINY)[0].params
+
+
+def test_a_dataset_made_with_other_settings_is_not_added_to(tmp_path):
+    from cablesim.commands.dataset import check_finished
+    from cablesim.jobs import result_path
+
+    jobs = dataset_jobs("movingcables", 0, 2, tmp_path, "test", TINY)
+    (tmp_path / "jobs").mkdir()
+    old = {**jobs[1].params, "root": "/moved/elsewhere"}  # a moved folder is still the same
+    result_path(tmp_path / "jobs", jobs[1]).write_text(json.dumps({"status": "ok", "params": old}))
+    check_finished(jobs, tmp_path / "jobs")
+    old.pop("motion")  # made before the hand's motion was drawn: along, 2 cm
+    result_path(tmp_path / "jobs", jobs[1]).write_text(json.dumps({"status": "ok", "params": old}))
+    with pytest.raises(ConfigError, match="0002-s000001.json: was made with other settings"):
+        check_finished(jobs, tmp_path / "jobs")
+    with pytest.raises(ConfigError, match="--amplitude"):
+        dataset_jobs("movingcables", 0, 2, tmp_path, "test", TINY, amplitude=(0.05, 0.02))
+    with pytest.raises(ConfigError, match="--directions: unknown 'up'"):
+        dataset_jobs("movingcables", 0, 2, tmp_path, "test", TINY, directions=("up",))
+
+
 @pytest.mark.slow
 def test_movingcables_clips_read_back_and_do_not_depend_on_workers(tmp_path):
     from cablesim.formats.movingcables import evaluate_clip, list_clips, read_clip

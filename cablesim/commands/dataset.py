@@ -29,11 +29,17 @@ from cablesim.commands._args import (
     add_pattern_argument,
     add_surface_argument,
 )
+from cablesim.episode.config import DIRECTION_NAMES
 from cablesim.errors import ConfigError
 from cablesim.files import OutputLock, write_text
-from cablesim.jobs import Job, execute, load_results, parse_range
+from cablesim.jobs import Job, execute, load_results, parse_range, read_result, result_path
 
 LAYOUTS = ("movingcables", "mcor")
+#: A MovingCables clip's hand motion: one direction drawn per clip, an amplitude (m) uniform in
+#: the range.  Pulling along the hose alone (the first datasets) moves almost no pixel across
+#: the hose (the normal flow); pulling across moves the hose as the real clips' stick does.
+CLIP_DIRECTIONS: tuple[str, ...] = ("along", "across")
+CLIP_AMPLITUDE: tuple[float, float] = (0.02, 0.05)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -49,6 +55,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_cable_argument(p, default="drawn per cable from every kind")
     add_pattern_argument(p, default="drawn per cable from every pattern", kind_choice=True)
     p.add_argument("--periods", type=int, default=None, help="periods per action (1 clip, 3 mcor)")
+    p.add_argument(
+        "--directions",
+        nargs="+",
+        default=list(CLIP_DIRECTIONS),
+        metavar="DIR",
+        help="movingcables: the hand's directions, one drawn per clip (default: along across)",
+    )
+    p.add_argument(
+        "--amplitude",
+        nargs=2,
+        type=float,
+        default=list(CLIP_AMPLITUDE),
+        metavar=("LO", "HI"),
+        help="movingcables: the hand's amplitude in metres, uniform in [LO, HI] per clip "
+        "(default 0.02 0.05)",
+    )
     p.add_argument("--quiet", action="store_true")
 
 
@@ -62,12 +84,16 @@ def dataset_jobs(
     periods: int | None = None,
     cable_kinds: tuple[str, ...] = tuple(CABLE_KINDS),
     cable_patterns: tuple[str, ...] = tuple(PATTERNS),
+    directions: tuple[str, ...] = CLIP_DIRECTIONS,
+    amplitude: tuple[float, float] = CLIP_AMPLITUDE,
 ) -> list:
     """One job per seed; each scene randomised, its cables' kinds drawn from ``cable_kinds``
-    and their patterns from ``cable_patterns`` (empty: each cable its kind's)."""
+    and their patterns from ``cable_patterns`` (empty: each cable its kind's); a MovingCables
+    clip's hand moves in one of ``directions`` by an amplitude drawn in ``amplitude`` (m)."""
 
     if layout == "mcor" and split == "train":
         raise ConfigError("--split", "the motion-correlation annotations have validation and test")
+    motion = check_motion(directions, amplitude) if layout == "movingcables" else None
     jobs = []
     for seed in range(first, stop):
         params = {
@@ -81,13 +107,47 @@ def dataset_jobs(
             },
             "periods": periods if periods is not None else (1 if layout == "movingcables" else 3),
         }
-        if layout == "movingcables":
+        if motion is not None:
+            params["motion"] = motion
             params["clip"] = seed - first + 1
             key = f"movingcables-{split}-{seed - first + 1:04d}-s{seed:06d}"
         else:
             key = f"mcor-{split}-s{seed:06d}"
         jobs.append(Job(f"dataset.{layout}", key, params))
     return jobs
+
+
+def check_motion(directions: tuple[str, ...], amplitude: tuple[float, float]) -> dict:
+    """The jobs' ``motion`` parameter, or the project's error naming the bad option."""
+    if not directions:
+        raise ConfigError("--directions", "give at least one direction")
+    for d in directions:
+        if d not in DIRECTION_NAMES:
+            raise ConfigError("--directions", f"unknown {d!r}; use {DIRECTION_NAMES}")
+    lo, hi = (float(v) for v in amplitude)
+    if not (0 < lo <= hi <= 0.2):
+        raise ConfigError("--amplitude", f"need 0 < LO <= HI <= 0.2 m, got {lo} {hi}")
+    return {"directions": list(directions), "amplitude": [lo, hi]}
+
+
+def check_finished(jobs: list, jobs_dir: Path) -> None:
+    """Refuse to add to a dataset whose finished sequences were made with other settings
+    (another hand motion, kinds, patterns, image size...): the folder would mix them silently.
+    The dataset root may have moved since (``root`` is not compared)."""
+    for job in jobs:
+        path = result_path(jobs_dir, job)
+        rec = read_result(path)
+        if rec is None:
+            continue
+        old = {k: v for k, v in dict(rec.get("params", {})).items() if k != "root"}
+        new = {k: v for k, v in json.loads(json.dumps(job.params)).items() if k != "root"}
+        if old != new:
+            diff = sorted(k for k in old.keys() | new.keys() if old.get(k) != new.get(k))
+            raise ConfigError(
+                str(path),
+                f"was made with other settings ({', '.join(diff)}: {old.get(diff[0])!r} there, "
+                f"{new.get(diff[0])!r} now); write to a new --out or give the same settings",
+            )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -101,9 +161,20 @@ def run(args: argparse.Namespace) -> int:
     kinds = (args.cable,) if args.cable is not None else tuple(CABLE_KINDS)
     patterns = {None: tuple(PATTERNS), "kind": ()}.get(args.pattern, (args.pattern,))
     jobs = dataset_jobs(
-        args.layout, a, b, args.out, args.split, scene, args.periods, kinds, patterns
+        args.layout,
+        a,
+        b,
+        args.out,
+        args.split,
+        scene,
+        args.periods,
+        kinds,
+        patterns,
+        tuple(args.directions),
+        tuple(args.amplitude),
     )
     with OutputLock(args.out):  # refused at once while another command writes there
+        check_finished(jobs, args.out / "jobs")
         summary = execute(
             jobs,
             args.out / "jobs",

@@ -35,6 +35,7 @@ from cablesim.errors import CablesimError, InputError
 from cablesim.files import commit, staged
 from cablesim.formats.mcor import sequence_name, write_annotation, write_mcor
 from cablesim.formats.movingcables import ClipFrame, labels_to_instances, write_clip
+from cablesim.seeding import stream
 from cablesim.sim.config import EpisodeConfig, SceneConfig
 from cablesim.sim.flow_gt import gt_flow
 from cablesim.sim.freeze import HoseFreeze
@@ -111,13 +112,16 @@ def simulate_clip(
     scene: SceneConfig,
     periods: int = 1,
     directions: tuple[str, ...] = ("along",),
+    amplitude: float = 0.02,
 ) -> SimClip | dict[str, Any]:
-    """A :class:`SimClip` of ``scene``, or a failure record (named outcome)."""
+    """A :class:`SimClip` of ``scene``, or a failure record (named outcome): the hand moves
+    the grasped hose ``periods`` times by +-``amplitude`` metres in ``directions``."""
 
     cfg = EpisodeConfig(scene=scene.replace(seed=seed)).with_values(
         {
             "interaction.actions.periods": int(periods),
             "interaction.actions.directions": tuple(directions),
+            "interaction.actions.amplitude": float(amplitude),
             "interaction.capture.min_gripper_step": 0.0,  # every frame: a video clip
             "interaction.retreat.verify": False,  # the clip ends with the action: no target
         }
@@ -192,14 +196,30 @@ def clip_name(index: int) -> str:
     return f"{index:04d}"
 
 
+def clip_motion(seed: int, motion: dict[str, Any] | None) -> tuple[str, float]:
+    """The action direction and amplitude (m) of clip ``seed``: one direction drawn from
+    ``motion["directions"]`` and an amplitude uniform in ``motion["amplitude"]`` (lo, hi),
+    from the seed's ``dataset_motion`` stream; without ``motion`` (jobs written before the
+    draw existed) the hand pulls along the hose by 2 cm."""
+    if not motion:
+        return "along", 0.02
+    names = tuple(motion["directions"])
+    lo, hi = (float(v) for v in motion["amplitude"])
+    rng = stream(seed, "dataset_motion")
+    direction = names[int(rng.integers(len(names)))]
+    return direction, float(lo + (hi - lo) * rng.random())
+
+
 def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
-    """Job: one MovingCables clip (params: seed, clip number, split, root, scene, periods)."""
+    """Job: one MovingCables clip (params: seed, clip number, split, root, scene, periods,
+    motion: see :func:`clip_motion`)."""
     t0 = time.perf_counter()
     seed = int(params["seed"])
     scene = scene_from(params)
-    clip = simulate_clip(seed, scene, int(params.get("periods", 1)))
+    direction, amplitude = clip_motion(seed, params.get("motion"))
+    clip = simulate_clip(seed, scene, int(params.get("periods", 1)), (direction,), amplitude)
     if isinstance(clip, dict):
-        return clip
+        return {**clip, "result": {**clip["result"], "direction": direction}}
     t_sim = time.perf_counter() - t0
     name = clip_name(int(params["clip"]))
     nbytes = write_sim_clip(Path(params["root"]) / params["split"], name, clip)
@@ -211,6 +231,8 @@ def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
             "split": params["split"],
             "seed": seed,
             "hose": clip.hose,
+            "direction": direction,
+            "amplitude": round(amplitude, 4),
             "images": len(clip.rgb),
             "bytes": nbytes,
             "hoses": scene.hoses.count,

@@ -35,7 +35,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from cablesim.cables import CABLE_KINDS, PATTERNS
-from cablesim.commands.dataset import dataset_jobs
+from cablesim.commands.dataset import (
+    CLIP_AMPLITUDE,
+    CLIP_DIRECTIONS,
+    check_finished,
+    check_motion,
+    dataset_jobs,
+)
 from cablesim.config import Config, check_int, check_positive
 from cablesim.errors import ConfigError, InputError
 from cablesim.files import OutputLock, append_line, drop_partial_last_line, write_text
@@ -91,8 +97,16 @@ class DataConfig(Config):
     validation: tuple[str, ...] = ("board 101000:101010", "table 101500:101510")
     width: int = 640
     height: int = 480
+    # the hand's motion in each clip (``cablesim dataset movingcables --directions/--amplitude``)
+    directions: tuple[str, ...] = CLIP_DIRECTIONS
+    amplitude: tuple[float, float] = CLIP_AMPLITUDE
 
     def _validate(self) -> None:
+        try:
+            check_motion(self.directions, self.amplitude)
+        except ConfigError as e:  # the same checks as the command line, this file's names
+            name = e.field.removeprefix("--")
+            raise ConfigError(f"data.{name}", str(e).removeprefix(f"{e.field}: ")) from None
         spans: list[tuple[str, int, int, str]] = []
         for name in ("train", "validation"):
             if not getattr(self, name):
@@ -198,7 +212,10 @@ def ensure_data(cfg: DataConfig, workers: int, ray: str | None, say: Progress) -
                 None,
                 tuple(CABLE_KINDS),
                 tuple(PATTERNS),
+                cfg.directions,
+                cfg.amplitude,
             )
+            check_finished(jobs, folder.parent / "jobs")
             summary = execute(
                 jobs,
                 folder.parent / "jobs",
