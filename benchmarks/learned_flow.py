@@ -40,6 +40,15 @@ from cablesim.perception.metrics import movingcables_summary
 DEFAULT_FLOWS = ("dis", "dis-medium", "farneback", "learned")
 
 
+def with_weights(spec: str, weights: str | None) -> str:
+    """``spec`` with ``weights=`` added when it names the learned flow without its own
+    (``learned`` and ``learned,gate=null`` alike: each learned back end runs the given file)."""
+    name, _, opts = spec.partition(",")
+    if weights is None or name != "learned" or "weights=" in opts:
+        return spec
+    return f"learned,weights={weights}" + (f",{opts}" if opts else "")
+
+
 def score(splits: list[Path], flow: str | FlowEstimator, truth: str) -> dict[str, dict[str, float]]:
     """Per split folder (and ``all``): the pooled MovingCables summary of ``flow``."""
     est = make_flow(flow) if isinstance(flow, str) else flow
@@ -151,10 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     for s in args.data:
         list_clips(s)  # a bad folder stops here
-    flows = [
-        f"learned,weights={args.weights}" if f == "learned" and args.weights else f
-        for f in args.flow
-    ]
+    flows = [with_weights(f, args.weights) for f in args.flow]
     results: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
     for truth in ("normal_flow", "flow"):
         results[truth] = {}

@@ -118,3 +118,14 @@ def test_recording_a_scene_again_clears_its_cached_statistics(tmp_path, monkeypa
     monkeypatch.setattr("cablesim.sim.session.simulate_episode", refuse)
     assert record_scene(scene)[1] == "failed"
     assert not stale.exists()
+
+
+def test_the_learned_flow_benchmark_runs_every_learned_spec_with_the_given_weights() -> None:
+    """``--weights`` reaches ``learned,gate=null`` too (it once ran the shipped file there)."""
+    from benchmarks.learned_flow import with_weights
+
+    assert with_weights("learned", "a.pt") == "learned,weights=a.pt"
+    assert with_weights("learned,gate=null", "a.pt") == "learned,weights=a.pt,gate=null"
+    assert with_weights("learned,weights=b.pt", "a.pt") == "learned,weights=b.pt"
+    assert with_weights("dis", "a.pt") == with_weights("dis", None) == "dis"
+    assert with_weights("learned,gate=null", None) == "learned,gate=null"

@@ -344,7 +344,8 @@ FLOW_BACKENDS.register(
 FLOW_BACKENDS.register(
     "learned",
     "cablesim.perception.learned:LearnedFlow",
-    "DIS refined by a network trained on cablesim's exact flow (torch; weights=FILE)",
+    "DIS medium gated by a network trained on cablesim's exact flow (torch; weights=FILE, "
+    "gate=P, base=network|dis|SPEC)",
 )
 FLOW_BACKENDS.register(
     "oracle", OracleFlow, "the simulator's ground-truth flow (simulated streams only)"

@@ -1,7 +1,8 @@
-"""A learned flow back end: DIS refined by a small network trained on cablesim's exact flow.
+"""A learned flow back end: DIS, kept where a small network trained on cablesim's exact flow
+sees motion.
 
 The network does not search for correspondences itself.  DIS (OpenCV, CPU) gives a first flow;
-the network sees what that flow explains and what it does not, and corrects it:
+the network sees what that flow explains and what it does not:
 
 - the working image: both images resized so that their width is ``work_width`` px (never
   enlarged), DIS ``dis_preset`` from image1 to image2 at that size;
@@ -13,16 +14,19 @@ the network sees what that flow explains and what it does not, and corrects it:
 - a small U-Net (a stride-2 encoder of ``widths`` channels at 1/2 .. 1/16 of the working
   size, a decoder back to 1/2 with ``decoder`` channels, a head at the working size) returns a
   correction of the flow (times ``flow_norm``) and a moving logit per pixel;
-- the flow is DIS plus the correction, resized to the input size; where the moving probability
-  is below ``gate`` (``None``: nowhere) it is zero, so a still background gives no motion.
+- the flow returned is :class:`LearnedFlow`'s ``base``: by default DIS medium at the input size
+  (``"dis-medium"``), or DIS plus the network's correction (``"network"``), or the
+  working-size DIS flow (``"dis"``); where the moving probability is below ``gate`` (``None``:
+  nowhere) it is zero, so a still background gives no motion.
 
 Why this design rather than a RAFT- or PWC-like network: it trains on a 2-core CPU in
 minutes from a few thousand simulated pairs (DIS already solves the large displacements a
-cost volume would have to learn), it runs at about 47 ms per 552x408 frame on one core, and
-what it has to learn is where DIS fails on cables: the motion it drags from a moving hose onto
-the still board beside it, and the noise it reports on plain regions.  The shipped weights
-do not beat DIS yet, in simulation or on real frames (``docs/perception.md`` has the
-measurements and what is missing).
+cost volume would have to learn), and what it has to learn is where DIS fails on cables: the
+motion it drags from a moving hose onto the still board beside it, and the noise it reports on
+plain regions.  Trained so, the flow correction did not learn (its error on moving pixels
+stays at DIS's) while the moving probability did, so the default uses the network as a gate
+on DIS alone: better than DIS on held-out simulated clips, worse on the real MovingCables
+clips (``docs/perception.md`` has the measurements).
 
 Weights are a ``torch.save`` dict ``{"format": "cablesim-learned-flow", "version": 1,
 "config": {...LearnedFlowConfig...}, "state_dict": {...}, "meta": {...}}``, loaded with
@@ -45,7 +49,13 @@ import numpy as np
 
 from cablesim.config import Config, check_int, check_positive, is_int, is_real
 from cablesim.errors import ConfigError, InputError
-from cablesim.perception.flow import DIS_PRESETS, FlowEstimator, _check_pair
+from cablesim.perception.flow import (
+    DIS_PRESETS,
+    FlowEstimator,
+    _check_pair,
+    check_flow,
+    make_flow,
+)
 from cablesim.perception.torchfile import import_torch, load_torch_file
 
 WEIGHTS_FORMAT = "cablesim-learned-flow"
@@ -55,6 +65,8 @@ DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "learned_flow.pt"
 #: input channels: image1 RGB, image2 RGB, image2 warped by DIS RGB, DIS flow (2), the
 #: photometric errors of the warped and of the unwarped image2
 IN_CHANNELS = 13
+#: what the moving probability gates by default (:class:`LearnedFlow`'s ``base``)
+BASE_DEFAULT = "dis-medium"
 
 
 def _torch() -> Any:
@@ -270,13 +282,17 @@ def load_model(path: str | Path) -> tuple[Any, dict[str, Any]]:
 
 # ----------------------------------------------------------------------------- estimator
 class LearnedFlow(FlowEstimator):
-    """DIS refined by a network trained on cablesim's ground truth (module docstring).
+    """DIS gated (or refined) by a network trained on cablesim's ground truth (module docstring).
 
     ``weights``: a weights file (default: the shipped model, :data:`DEFAULT_WEIGHTS`);
     ``gate``: the moving probability below which the flow is zero (``None``: never zeroed);
     ``threads``: torch's intra-op threads (default: leave torch's setting alone);
     ``work_width``: run at this working width instead of the model's (the network is
-    convolutional and trained across scales: a smaller width is the faster variant).
+    convolutional and trained across scales: a smaller width is the faster variant);
+    ``base``: the flow the moving probability gates: ``"network"`` (DIS plus the network's
+    correction), ``"dis"`` (the working-size DIS flow the network was given, the network only
+    deciding where things move: no extra cost) or any other flow back-end spec, computed at
+    the input size (e.g. ``"dis-medium"``).
     """
 
     name = "learned"
@@ -287,7 +303,16 @@ class LearnedFlow(FlowEstimator):
         gate: float | None = 0.5,
         threads: int | None = None,
         work_width: int | None = None,
+        base: str = BASE_DEFAULT,
     ) -> None:
+        if not isinstance(base, str) or not base.strip():
+            raise InputError(
+                f"learned flow base must be 'network', 'dis' or a flow spec, got {base!r}"
+            )
+        if base not in ("network", "dis"):
+            if base.partition(",")[0] == "learned":
+                raise InputError("learned flow base cannot be the learned flow itself")
+            check_flow(base)  # an unknown back end is refused here, before any weights load
         if gate is not None and not (is_real(gate) and 0.0 <= float(gate) < 1.0):
             raise InputError(f"learned flow gate must be in [0, 1) or None, got {gate!r}")
         if threads is not None and not (is_int(threads) and int(threads) >= 1):
@@ -295,6 +320,8 @@ class LearnedFlow(FlowEstimator):
         self.weights = Path(weights) if weights is not None else DEFAULT_WEIGHTS
         self.gate = None if gate is None else float(gate)
         self.threads = None if threads is None else int(threads)
+        self.base = base
+        self._base = None if base in ("network", "dis") else make_flow(base)
         self.model, self.meta = load_model(self.weights)
         self.cfg: LearnedFlowConfig = self.model.cfg
         if work_width is not None:
@@ -320,10 +347,16 @@ class LearnedFlow(FlowEstimator):
         finally:
             if self.threads is not None:
                 torch.set_num_threads(old)
-        flow = dis + out[:2].transpose(1, 2, 0) * np.float32(self.cfg.flow_norm)
         prob = 1.0 / (1.0 + np.exp(-out[2]))
+        if self._base is not None:
+            flow = self._base.compute(image1, image2)
+        elif self.base == "dis":
+            flow = dis
+        else:
+            flow = dis + out[:2].transpose(1, 2, 0) * np.float32(self.cfg.flow_norm)
         if scale != 1.0:
-            flow = cv2.resize(flow, (w, h), interpolation=cv2.INTER_LINEAR) / np.float32(scale)
+            if self._base is None:
+                flow = cv2.resize(flow, (w, h), interpolation=cv2.INTER_LINEAR) / np.float32(scale)
             prob = cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
         return np.ascontiguousarray(flow, np.float32), np.ascontiguousarray(prob, np.float32)
 
@@ -338,6 +371,7 @@ class LearnedFlow(FlowEstimator):
             "name": self.name,
             "weights": str(self.weights),
             "gate": self.gate,
+            "base": self.base,
             "config": self.cfg.to_dict(),
             "trained": {k: self.meta[k] for k in ("commit", "run", "steps") if k in self.meta},
         }

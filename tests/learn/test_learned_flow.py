@@ -226,6 +226,11 @@ def test_configs_are_checked():
         DataConfig(train=("board 0:10",), validation=("table 5:15",))
     with pytest.raises(ConfigError, match="SURFACE A:B"):
         DataConfig(train=("board 10",))
+    assert DataConfig().directions == ("along", "across")  # the clips' hand motion
+    with pytest.raises(ConfigError, match="data.amplitude: need 0 < LO <= HI"):
+        DataConfig(amplitude=(0.05, 0.01))
+    with pytest.raises(ConfigError, match="data.directions: unknown 'up'"):
+        DataConfig(directions=("up",))
 
 
 def test_band_helper_moves_by_its_shift():
@@ -251,7 +256,8 @@ def test_the_command_shows_its_config_and_refuses_bad_values(capsys):
 def test_the_shipped_model_loads_and_finds_a_moving_band(clips):
     """The default weights (``cablesim train --config configs/learned_flow.json``) load, were
     made from that config, report no motion between two equal images and find the moving band
-    of an analytic clip (IoU 0.42-0.68 on these clips when shipped; DIS 0.60)."""
+    of an analytic clip (DIS medium gated by the network's moving probability, the default:
+    IoU 0.64-0.69 on these clips when shipped; the network's own flow 0.42-0.68; DIS 0.60)."""
     from pathlib import Path
 
     from cablesim.formats.movingcables import evaluate_clip
@@ -266,3 +272,9 @@ def test_the_shipped_model_loads_and_finds_a_moving_band(clips):
     assert not est.compute(img, img).any()
     _, summary = evaluate_clip(root / "train", first.clip, est, 1.0, truth="flow")
     assert summary.iou > 0.3, summary
+    assert est.base == "dis-medium"
+    own = LearnedFlow(base="network")  # DIS plus the network's correction, the same gate
+    _, summary = evaluate_clip(root / "train", first.clip, own, 1.0, truth="flow")
+    assert summary.iou > 0.3, summary
+    with pytest.raises(InputError, match="unknown flow back end 'lava'"):
+        LearnedFlow(base="lava")

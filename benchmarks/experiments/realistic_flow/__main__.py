@@ -98,6 +98,8 @@ AFTER = ("dis-fine", "arm+normal", "fg-c3")
 # distance 15: the best of 10-21 on the validation scenes; thresholds tuned without it)
 COLOUR = (*AFTER, 15.0)
 ORACLE = ("oracle", "raw", "none")
+# ``--learned``: the after configuration with the shipped learned flow in place of DIS fine
+LEARNED_FLOW = "learned"
 METHODS = ("correlation", "segmentation", "ablation")
 
 
@@ -288,6 +290,12 @@ def main() -> None:
         help="the configuration reported as 'after' (default: the chosen defaults, "
         f"{'/'.join(AFTER)}); e.g. another setting's validation winner",
     )
+    e.add_argument(
+        "--learned",
+        action="store_true",
+        help="add the row 'learned': the after configuration with the shipped learned flow "
+        "(torch) in place of its flow",
+    )
     _add_kind_args(e)
     e.add_argument(
         "--out",
@@ -372,6 +380,9 @@ def main() -> None:
         "oracle": ORACLE,
     }
     combos["oracle+support"] = ("oracle", "arm", after[2])
+    if args.learned:
+        combos["learned"] = (LEARNED_FLOW, *after[1:])
+        report["learned"] = list(combos["learned"])
     timings = {}
     noises = (True,) if args.noisy_only else (True, False)
     report["noise"] = ["noisy"] if args.noisy_only else ["noisy", "clean"]
@@ -393,7 +404,11 @@ def main() -> None:
     }
     if not args.skip_proposals:
         log("grasp proposals on the test scenes (noisy) ...")
-        names = ("before", "previous", "after", "after+colour", "oracle")
+        names = tuple(
+            n
+            for n in ("before", "previous", "after", "after+colour", "learned", "oracle")
+            if n in combos
+        )
         report["proposals"] = {n: [] for n in names}
         for s in test:
             votes, tg = {}, None

@@ -35,6 +35,7 @@ from cablesim.perception.correlation import (
 )
 from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow
 from cablesim.perception.flow_region import FlowRegion, RegionFlow
+from cablesim.perception.learned import LearnedFlow
 from cablesim.perception.methods import make_method
 from cablesim.perception.metrics import nanmean, score_mask
 from cablesim.perception.pipeline import StreamStatistics, plan_jobs
@@ -175,6 +176,8 @@ FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {
     "dis-fast-board1.5": lambda s: RegionFlow(
         DISFlow("fast"), FlowRegion.from_crop(board_crop(s.scene, s.stream.intrinsics), 1.5)
     ),
+    # the shipped learned flow (issue 23): DIS medium gated by the network's moving probability
+    "learned": lambda s: LearnedFlow(),
 }
 
 SAMPLES: dict[str, RefineParams] = {

@@ -33,7 +33,7 @@ def _combo(c: list) -> str:
 
 
 #: the configurations of the tables, in order (a report may lack some)
-ROWS = ("before", "previous", "after", "after+colour", "oracle")
+ROWS = ("before", "previous", "after", "after+colour", "learned", "oracle")
 
 
 #: what each recorded setting (``record.GEOMETRIES``) is
@@ -111,6 +111,13 @@ def render(rep: dict[str, Any]) -> str:
             "colour, thresholds tuned without it; it relies on the hoses differing in colour "
             "(cablesim's palette gives the 4 hoses of a scene 4 different colours)"
             if "colour" in rep
+            else ""
+        )
+        + (
+            f"; **learned** = {_combo(rep['learned'])}: the after configuration with the "
+            "shipped learned flow (`cablesim.perception.learned.LearnedFlow()`) in place of its "
+            "flow, thresholds tuned on validation like every row"
+            if "learned" in rep
             else ""
         ),
         "",
