@@ -36,9 +36,11 @@ from cablesim.jobs import Job, execute, read_result
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = ["--width", "160", "--height", "120", "--periods", "1", "--workers", "1", "--quiet"]
-DATASET = ["dataset", "movingcables", "--scenes", "402:404", *TINY]  # 2 clips, about 15 s
-CLIP_1 = "movingcables-test-0001-s000402"
-CLIP_2 = "movingcables-test-0002-s000403"
+# 2 clips, about 20 s: seed 406 pulls along by 4.8 cm, 407 across by 4.5 cm (402:404, used
+# before the hand's motion was drawn per clip, now tears seed 403's hose pulled along by 2.9 cm)
+DATASET = ["dataset", "movingcables", "--scenes", "406:408", *TINY]
+CLIP_1 = "movingcables-test-0001-s000406"
+CLIP_2 = "movingcables-test-0002-s000407"
 THESIS = [
     "benchmark",
     "thesis",
@@ -532,9 +534,9 @@ def test_a_full_disk_during_a_dataset_keeps_the_finished_sequences(small_disk, c
     from cablesim.cli import main
     from cablesim.formats.movingcables import list_clips, read_clip
 
-    # clip 1 takes 1.95 MB in 4 kB blocks (1.46 MB of files), clip 2 1.3 MB (0.83): only
+    # clip 1 takes 2.63 MB in 4 kB blocks (1.71 MB of files), clip 2 2.42 MB (1.68): only
     # clip 1 fits
-    disk, how = small_disk(2_600_000, 1_700_000)
+    disk, how = small_disk(3_400_000, 2_400_000)
     out = disk / "mc"
     assert main([*DATASET, "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
