@@ -5,10 +5,11 @@
 One row per frame: the image, the true moving pixels, DIS medium's moving pixels (|flow| >
 1 px), the network's moving probability and the learned flow's moving pixels (DIS medium where
 the probability is at least the gate); in the masks the arm or stick, never scored, is grey.
-The simulated frame is the image of the first clip of ``SPLIT`` where most pixels move (a held-out test split of ``cablesim dataset movingcables``; truth: normal
-flow > 1 px, the arm blanked); the real frames are the middle frames of the MovingCables clips
-0003 and 0006 (``benchmarks.real_clips``; evaluation only).  Writes
-``docs/img/learned_flow_gate.png`` by default.
+The simulated frame is the image of the first clip of ``SPLIT`` (a held-out test split of
+``cablesim dataset movingcables``; truth: normal flow > 1 px) where most pixels move; the real
+frames are the middle frames of the MovingCables clips 0003 and 0006
+(``benchmarks.real_clips``; evaluation only).  Writes ``docs/img/learned_flow_gate.png`` by
+default.
 """
 
 from __future__ import annotations

@@ -54,6 +54,7 @@ from benchmarks.experiments.realistic_flow.record import (
     recorded,
     suffix,
 )
+from benchmarks.experiments.realistic_flow.report import ROWS
 from cablesim import provenance as pv
 
 # scene counts: what a shared 2-core machine allowed (one interaction ~45 s CPU to simulate)
@@ -404,11 +405,7 @@ def main() -> None:
     }
     if not args.skip_proposals:
         log("grasp proposals on the test scenes (noisy) ...")
-        names = tuple(
-            n
-            for n in ("before", "previous", "after", "after+colour", "learned", "oracle")
-            if n in combos
-        )
+        names = tuple(n for n in ROWS if n in combos)  # the report's rows, in its order
         report["proposals"] = {n: [] for n in names}
         for s in test:
             votes, tg = {}, None
