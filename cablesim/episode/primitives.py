@@ -401,9 +401,14 @@ def _grasp_once(
     app = g.rotation[:, 2]  # the hand's approach axis: the board normal made orthogonal to the hose
     pre = g.translated(-cfg.pregrasp_offset * app)
     if not robot.open(cfg.open_width):
-        # named unreachable since the first runner (a grasp that fails before moving)
+        # the gripper's failure, not the grasp point's: no neighbouring point cures it, so it
+        # is not retried (in simulation, fingers that closed on nothing fast enough to pass
+        # through each other stay crossed; table rope seed 11608)
         return PrimitiveResult.fail(
-            "grasp", "the gripper did not open", Outcome.UNREACHABLE, moved=False
+            "grasp",
+            f"the gripper did not open (opening {robot.gripper_opening * 1000:.1f} mm)",
+            Outcome.RELEASE_FAILED,
+            moved=from_pregrasp,
         )
     r = robot.move_to(pre, speed=cfg.approach_speed) if from_pregrasp else MoveResult(False)
     if not r:

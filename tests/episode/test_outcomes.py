@@ -336,6 +336,37 @@ def test_release_and_retreat_name_their_failures() -> None:
     assert prim.retreat(arm, PARK).outcome is Outcome.RETREAT_FAILED
 
 
+def test_a_gripper_that_does_not_open_for_a_retry_is_release_failed_and_ends_the_grasp() -> None:
+    class _Jams(_Arm):
+        """Holds nothing, and its fingers stay shut once they have closed."""
+
+        closed = False
+
+        @property
+        def gripper_opening(self) -> float:
+            return -0.0139 if self.closed else 0.08
+
+        def open(self, width: float = 0.08, speed: float = 0.1) -> bool:
+            self.log.append(("open", width))
+            return not self.closed
+
+        def grasp(
+            self, width=0.015, force=70.0, speed=0.05, epsilon_inner=0.01, epsilon_outer=0.01
+        ):
+            self.closed = True
+            return False
+
+    arm = _Jams()
+    cfg = dataclasses.replace(_config().grasp, retries=2)
+    r = prim.grasp_at(arm, np.array([1.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), cfg)
+    assert r.outcome is Outcome.RELEASE_FAILED
+    assert r.reason == "grasp: the gripper did not open (opening -13.9 mm)"
+    # the first attempt closed on nothing; the second found the gripper shut and stopped there
+    first, second = (a["result"] for a in r.details["attempts"])
+    assert first.startswith("close: nothing held") and second == r.reason
+    assert r.moved
+
+
 def test_a_move_to_the_pre_grasp_out_of_reach_is_unreachable() -> None:
     arm = _Arm(_fails("move_joints", lambda q: True, "could not", None))
     cfg = dataclasses.replace(_config().grasp, standoff=0.0)
