@@ -28,12 +28,6 @@ DEFAULT_DIAMETER = 2 * CABLE_KINDS[DEFAULT_KIND].radius
 #: A fitted grasp accepts an opening within this fraction of the diameter around it (the
 #: 15 mm hose: 12 mm, the value of the thesis's setup).
 GRASP_EPSILON_RATIO = 0.8
-#: A fitted grasp lifts the cable off a surface it lies on (the table) by this many of its
-#: diameters before the actions, at most by the surface's own lift (``Surface.lift``, the
-#: table's 1 cm): 4 mm for the 2 mm wire, the whole 1 cm for the thicker kinds.  Lifted 1 cm,
-#: the wire hangs from the fingertips down to the mat on both sides and is pulled out of the
-#: pads downwards (docs/cables.md, *Table, thin wire*).
-LIFT_DIAMETERS = 2.0
 #: Named action directions (see :func:`cablesim.episode.primitives.action_direction`).
 DIRECTION_NAMES = ("along", "across", "normal", "vertical", "horizontal")
 
@@ -57,10 +51,6 @@ class GraspConfig(Config):
     force: float = 70.0  # N
     # m, accepted opening around ``width`` (franky epsilon); None: 0.8 x the cable's diameter
     epsilon: float | None = None
-    # m the hand lifts the grasped cable off a surface it lies on before the actions, at most
-    # the surface's own lift (the table's 1 cm, the board's 0); None: twice the grasped
-    # cable's diameter (LIFT_DIAMETERS)
-    lift: float | None = None
     hold_check_distance: float = 0.01  # m pulled back from the board to test the hold
     hold_tolerance: float = 0.005  # m, hose point vs hand displacement (sim verification)
     open_width: float = 0.08
@@ -76,12 +66,11 @@ class GraspConfig(Config):
     min_follow_r2: float = 0.9
 
     def fitted(self, diameter: float | None = None) -> GraspConfig:
-        """This config with ``width``, ``epsilon``, ``surface_offset`` and ``lift`` that are
-        None made those of a cable of ``diameter`` (m): the diameter, 0.8 of it, its half and
-        twice it.  A session fits its interaction to the cable it grasps
-        (``Session.interaction_config``); ``diameter`` None is the default cable kind's (the
-        15 mm garden hose: 15, 12, 7.5 and 30 mm, the last capped by a surface's lift), what a
-        config not fitted by a session closes on."""
+        """This config with ``width``, ``epsilon`` and ``surface_offset`` that are None made
+        those of a cable of ``diameter`` (m): the diameter, 0.8 of it and its half.  A
+        session fits its interaction to the cable it grasps (``Session.interaction_config``);
+        ``diameter`` None is the default cable kind's (the 15 mm garden hose: 15, 12 and
+        7.5 mm), what a config not fitted by a session closes on."""
         if diameter is None:
             diameter = DEFAULT_DIAMETER
         check_positive("grasp diameter", diameter)
@@ -89,7 +78,6 @@ class GraspConfig(Config):
             "width": diameter if self.width is None else self.width,
             "epsilon": GRASP_EPSILON_RATIO * diameter if self.epsilon is None else self.epsilon,
             "surface_offset": diameter / 2 if self.surface_offset is None else self.surface_offset,
-            "lift": LIFT_DIAMETERS * diameter if self.lift is None else self.lift,
         }
         if all(getattr(self, k) == v for k, v in values.items()):
             return self
@@ -107,9 +95,8 @@ class GraspConfig(Config):
         for name in ("width", "epsilon"):
             if getattr(self, name) is not None:
                 check_positive(f"grasp.{name}", getattr(self, name))
-        for name in ("surface_offset", "lift"):
-            if getattr(self, name) is not None:
-                check_positive(f"grasp.{name}", getattr(self, name), allow_zero=True)
+        if self.surface_offset is not None:
+            check_positive("grasp.surface_offset", self.surface_offset, allow_zero=True)
         check_positive("grasp.standoff", self.standoff, allow_zero=True)
         check_positive("grasp.hold_check_distance", self.hold_check_distance, allow_zero=True)
         check_positive("grasp.hold_tolerance", self.hold_tolerance)

@@ -202,9 +202,8 @@ def plan_interaction(
     if not g or g.pose is None:
         return False, f"planned {g.reason}"
     g1 = g.pose
-    lift = surface.lift_for(cfg.grasp.lift)
-    if lift > 0 and cfg.kind == "grasp":
-        g1 = g1.translated(-lift * _unit(approach))
+    if surface.lift > 0 and cfg.kind == "grasp":
+        g1 = g1.translated(-surface.lift * _unit(approach))
         r = dry.move_to(g1, speed=cfg.grasp.approach_speed)
         if not r:
             return False, f"planned lift: {r.reason}"

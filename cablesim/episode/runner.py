@@ -351,9 +351,8 @@ def grasp(s: InteractionState) -> bool:
         return s.abort(g.outcome, g.reason, moved=g.moved)
     result.grasp = g.pose
     assert g.pose is not None
-    lift = s.surface.lift_for(cfg.grasp.lift)
-    if cfg.kind == "grasp" and lift > 0:  # off the table before the actions
-        lifted = g.pose.translated(-lift * s.approach)
+    if cfg.kind == "grasp" and s.surface.lift > 0:  # off the table before the actions
+        lifted = g.pose.translated(-s.surface.lift * s.approach)
         r = s.robot.move_to(lifted, speed=cfg.grasp.approach_speed)
         if not r:
             return s.abort(Outcome.ACTION_FAILED, f"lift after the grasp: {r.reason}")

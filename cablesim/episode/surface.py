@@ -31,8 +31,7 @@ class Surface:
     ``FINGERTIP_CLEARANCE`` above it; ``lift``: how far the hand lifts the grasped cable off
     the surface (along -approach) before the actions, so that the fingertips do not drag on
     it (measured on the table without it: the pads' friction on the mat held the hand 16 mm
-    short of an action's target), at most: a grasp fitted to a thin cable lifts less
-    (:meth:`lift_for`, ``GraspConfig.lift``); ``faces_camera``: the surface lies behind the cables along
+    short of an action's target); ``faces_camera``: the surface lies behind the cables along
     the camera's view, so the nearest depths of a proposed segment are the cable's (the board;
     the exploration's ``front_filter`` relies on it), not the table seen obliquely, where depth
     runs along a lying cable; ``needs_slack``: the cables lie on the surface, held along
@@ -48,11 +47,6 @@ class Surface:
     lift: float = 0.0
     faces_camera: bool = False
     needs_slack: bool = False
-
-    def lift_for(self, lift: float | None) -> float:
-        """How far (m) the hand lifts a grasped cable here: ``lift`` (``GraspConfig.lift``),
-        at most this surface's ``lift``; None: the surface's."""
-        return self.lift if lift is None else min(self.lift, float(lift))
 
     def grasp_centre(self, centre: np.ndarray) -> np.ndarray:
         """``centre`` (world), raised where the fingertips would otherwise touch the surface."""

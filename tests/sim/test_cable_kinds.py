@@ -34,9 +34,7 @@ def test_the_default_kind_is_the_hose_the_scenes_always_had() -> None:
     c = GARDEN_HOSE
     assert (c.radius, c.segment_length, c.young, c.poisson) == (0.0075, 0.03, (2e6, 8e6), 0.3)
     assert (c.mass_per_metre, c.damping, c.friction, len(c.colors)) == (0.15, 0.02, 0.9, 8)
-    assert GraspConfig().fitted() == GraspConfig(
-        width=0.015, epsilon=0.012, surface_offset=0.0075, lift=0.03
-    )
+    assert GraspConfig().fitted() == GraspConfig(width=0.015, epsilon=0.012, surface_offset=0.0075)
 
 
 def test_every_kind_is_documented_and_listed(capsys) -> None:
@@ -209,24 +207,6 @@ def test_a_grasp_fits_the_cable_it_closes_on() -> None:
     g = GraspConfig().fitted(0.002)
     assert (g.width, g.epsilon, g.surface_offset) == (0.002, pytest.approx(0.0016), 0.001)
     assert GraspConfig(width=0.004).fitted(0.002).width == 0.004  # a given value stays
-
-
-def test_the_lift_off_the_table_fits_the_cable_and_never_exceeds_the_surfaces() -> None:
-    """A thin wire is lifted 4 mm, the thicker kinds the table's whole 1 cm (as before the
-    fitted lift), a cable on the board not at all; a lift the config gives stays."""
-    from cablesim.episode.surface import BOARD, TABLE
-
-    lifts = {
-        name: TABLE.lift_for(GraspConfig().fitted(2 * kind.radius).lift)
-        for name, kind in CABLE_KINDS.items()
-    }
-    assert lifts["thin_wire"] == pytest.approx(0.004)
-    assert {lifts[k] for k in ("garden_hose", "electrical_cable", "rope")} == {TABLE.lift}
-    assert TABLE.lift_for(None) == TABLE.lift == 0.01
-    assert BOARD.lift_for(GraspConfig().fitted(0.002).lift) == BOARD.lift_for(None) == 0.0
-    assert GraspConfig(lift=0.002).fitted(0.015).lift == 0.002
-    with pytest.raises(ConfigError, match=r"grasp\.lift"):
-        GraspConfig(lift=-0.001)
 
 
 @pytest.mark.parametrize("kind", OTHER_KINDS)
