@@ -32,8 +32,12 @@ TAG = "rf1"
 
 #: recorded settings: "default" (640x480, 3 periods per action), "thesis" (the D456 at
 #: 1280x720) and "fast" (320x240 and 2 periods per action: the setting that brings one
-#: interaction near issue 9's 12 s here, benchmarks/results/episode_variants.md)
-GEOMETRIES = ("default", "thesis", "fast")
+#: interaction near issue 9's 12 s here, benchmarks/results/episode_variants.md) and "sleep"
+#: (the default with MuJoCo's sleeping islands on, ``physics.sleep_tolerance`` 1e-3: issue 21's
+#: lever, scored against the default on the same protocol)
+GEOMETRIES = ("default", "thesis", "fast", "sleep")
+#: ``physics.sleep_tolerance`` of the "sleep" setting (benchmarks/results/sleep_islands.md)
+SLEEP_TOLERANCE = 1e-3
 #: what the cables are and what holds them (issue 22): a scene of the default hose on the board
 #: keeps its old name (and its recordings); any other kind or surface is named after them
 DEFAULT_CABLE, DEFAULT_SURFACE = DEFAULT_KIND, "board"
@@ -100,6 +104,8 @@ class Scene:
         looks = {"board.background": self.board}
         if self.surface == "table":
             looks["table.background"] = self.board
+        if self.geometry == "sleep":
+            looks["physics.sleep_tolerance"] = SLEEP_TOLERANCE
         scene = SceneConfig(seed=self.seed, camera=camera).with_values(
             {"surface": self.surface, "hoses.kind": self.cable, **looks}
         )
