@@ -117,16 +117,22 @@ def dataset_jobs(
     return jobs
 
 
-def check_motion(directions: tuple[str, ...], amplitude: tuple[float, float]) -> dict:
-    """The jobs' ``motion`` parameter, or the project's error naming the bad option."""
+def check_motion(
+    directions: tuple[str, ...],
+    amplitude: tuple[float, float],
+    names: tuple[str, str] = ("--directions", "--amplitude"),
+) -> dict:
+    """The jobs' ``motion`` parameter, or the project's error naming the bad option (``names``:
+    what the directions and the amplitude are called where they came from)."""
+    where_dirs, where_amp = names
     if not directions:
-        raise ConfigError("--directions", "give at least one direction")
+        raise ConfigError(where_dirs, "give at least one direction")
     for d in directions:
         if d not in DIRECTION_NAMES:
-            raise ConfigError("--directions", f"unknown {d!r}; use {DIRECTION_NAMES}")
+            raise ConfigError(where_dirs, f"unknown {d!r}; use {DIRECTION_NAMES}")
     lo, hi = (float(v) for v in amplitude)
     if not (0 < lo <= hi <= 0.2):
-        raise ConfigError("--amplitude", f"need 0 < LO <= HI <= 0.2 m, got {lo} {hi}")
+        raise ConfigError(where_amp, f"need 0 < LO <= HI <= 0.2 m, got {lo} {hi}")
     return {"directions": list(directions), "amplitude": [lo, hi]}
 
 

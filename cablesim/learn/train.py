@@ -102,11 +102,8 @@ class DataConfig(Config):
     amplitude: tuple[float, float] = CLIP_AMPLITUDE
 
     def _validate(self) -> None:
-        try:
-            check_motion(self.directions, self.amplitude)
-        except ConfigError as e:  # the same checks as the command line, this file's names
-            name = e.field.removeprefix("--")
-            raise ConfigError(f"data.{name}", str(e).removeprefix(f"{e.field}: ")) from None
+        # the same checks as the command line, named as this file names the fields
+        check_motion(self.directions, self.amplitude, ("data.directions", "data.amplitude"))
         spans: list[tuple[str, int, int, str]] = []
         for name in ("train", "validation"):
             if not getattr(self, name):

@@ -173,8 +173,7 @@ FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {
     # the default flow on the board's (the table's mat's) crop, not scaled: issue 21's lever
     # "perception where hoses can move"
     "dis-fine-board": lambda s: RegionFlow(
-        DISFlow("medium", finest_scale=1, patch_size=8, patch_stride=4),
-        FlowRegion.from_crop(board_crop(s.scene, s.stream.intrinsics)),
+        FLOWS["dis-fine"](s), FlowRegion.from_crop(board_crop(s.scene, s.stream.intrinsics))
     ),
     "dis-medium-board1.5": lambda s: RegionFlow(
         DISFlow("medium"), FlowRegion.from_crop(board_crop(s.scene, s.stream.intrinsics), 1.5)
