@@ -12,7 +12,8 @@ hose, an amplitude ``A``, a period ``P``, a phase and a unit direction ``e`` in 
 before every physics step of the action it sets ``data.xfrc_applied`` on those vertices: a
 damped, capped spring pulls each towards ``rest + A sin(2 pi (t - t0) / P + phase) e``, where
 ``rest`` is the vertex's position when the action started (its gains scaled down on a vertex
-lighter than :data:`REFERENCE_MASS`).  The motion is independent of the
+lighter than :data:`REFERENCE_MASS`, its damping capped at the vertex's mass over the physics
+timestep: :func:`stable_damping`).  The motion is independent of the
 gripper (its own period and phase).  When the action ends the forces are removed, so release,
 retreat and settling (and the target frame) are not disturbed::
 
@@ -41,6 +42,21 @@ from cablesim.sim.config import PerturbConfig
 REFERENCE_MASS = 0.004
 
 
+def stable_damping(damping: float, mass: float, timestep: float) -> float:
+    """``damping`` (N s/m) capped at ``mass / timestep``.
+
+    The pull is an explicit force, read from the vertex's velocity at the start of a step.  One
+    step of a vertex of mass m under a spring k and a damper c maps (velocity, position) with
+    determinant ``1 - c dt / m``: above ``c dt / m = 2`` the step amplifies, and above 1 the
+    damper alone reverses the vertex's velocity within a step.  The config's 3 N s/m on a
+    4.3 g hose vertex over a 4 ms step is ``c dt / m = 2.8``: the pulled vertices rang at the
+    step's frequency up to the force cap (velocity reversed on 14 % of the steps, peaks of
+    1.5 m/s where the pull's own motion is about 0.05 m/s; on the table, where the mat's
+    friction takes part, a perturbed rope's action took 0.6 s per step and failed).  Capped,
+    ``c dt / m <= 1``: no reversal, the pull moves the vertex as drawn."""
+    return min(float(damping), float(mass) / float(timestep))
+
+
 @dataclass
 class _Pull:
     body: int
@@ -50,6 +66,7 @@ class _Pull:
     period: float
     phase: float
     scale: float  # of the gains and the cap: min(1, the vertex's mass / REFERENCE_MASS)
+    damping: float  # N s/m: the scaled damping, capped by stable_damping
 
 
 class NeighbourPerturbation:
@@ -104,7 +121,10 @@ class NeighbourPerturbation:
                 m = world.model  # the vertex's weight (an inertia_scale is compensated)
                 weight = float(m.body_mass[b]) * (1.0 - float(m.body_gravcomp[b]))
                 scale = min(1.0, weight / REFERENCE_MASS)
-                self._pulls.append(_Pull(b, d.xpos[b].copy(), e, amp, period, phase, scale))
+                damping = stable_damping(scale * cfg.damping, m.body_mass[b], m.opt.timestep)
+                self._pulls.append(
+                    _Pull(b, d.xpos[b].copy(), e, amp, period, phase, scale, damping)
+                )
             self.log.append(
                 {
                     "time": float(d.time),
@@ -132,9 +152,9 @@ class NeighbourPerturbation:
             target = p.rest + off * p.direction
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, p.body, vel, 0)
             # a vertex lighter than REFERENCE_MASS gets the gains and the cap in proportion to
-            # its mass: the same pull per unit mass as the hose's
+            # its mass: the same pull per unit mass as the hose's; the damping stays stable
             s = p.scale
-            f = s * (cfg.stiffness * (target - d.xpos[p.body]) - cfg.damping * vel[3:])
+            f = s * cfg.stiffness * (target - d.xpos[p.body]) - p.damping * vel[3:]
             norm = float(np.linalg.norm(f))
             if norm > s * cfg.max_force:
                 f *= s * cfg.max_force / norm

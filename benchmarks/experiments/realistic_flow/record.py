@@ -26,8 +26,9 @@ from pathlib import Path
 from cablesim.cables import DEFAULT_KIND
 
 CACHE = Path(os.environ.get("CABLESIM_STREAMS", Path.home() / ".cache" / "cablesim" / "streams"))
-#: bump when the recorded interaction changes (a new tag records into a new folder)
-TAG = "rf1"
+#: bump when the recorded interaction changes (a new tag records into a new folder); rf2: the
+#: perturbation's damping capped for stability (cablesim.sim.perturb.stable_damping)
+TAG = "rf2"
 
 
 #: recorded settings: "default" (640x480, 3 periods per action), "thesis" (the D456 at
