@@ -37,6 +37,7 @@ from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT
 from cablesim.sim.camera import SimCamera
 from cablesim.sim.config import BACKGROUNDS, SceneConfig
 from cablesim.sim.flow_gt import gt_flow
+from cablesim.sim.perturb import stable_damping
 from cablesim.sim.settle import settle_world
 from cablesim.sim.world import World
 from cablesim.viz import (
@@ -99,11 +100,9 @@ def pull_hose(world, hose_index: int, distance: float, duration: float) -> dict:
     body = int(hose.vertex_bodies[k])
     cable = hose.spec.cable
     scale = cable.mass_per_metre * cable.segment_length / PULL_VERTEX_MASS  # 1 for the hose
-    stiffness, damping, max_force = (
-        scale * PULL_STIFFNESS,
-        scale * PULL_DAMPING,
-        scale * PULL_MAX_FORCE,
-    )
+    stiffness, max_force = scale * PULL_STIFFNESS, scale * PULL_MAX_FORCE
+    # an explicit force: its damping capped for a stable step (as the perturbation's)
+    damping = stable_damping(scale * PULL_DAMPING, m.body_mass[body], m.opt.timestep)
     start = d.xpos[body].copy()
     target = start + np.array([0.0, distance, 0.0])
     n_steps = int(round(duration / m.opt.timestep))
