@@ -849,7 +849,7 @@ class PerturbConfig(Config):
     amplitude: tuple[float, float] = (0.01, 0.03)  # m, drawn per action and hose
     period: tuple[float, float] = (2.5, 4.0)  # s: slower than a 1 m hose swings (~1.6 s)
     stiffness: float = 120.0  # N/m
-    damping: float = 3.0  # N s/m
+    damping: float = 3.0  # N s/m; per vertex at most its mass / timestep (perturb.stable_damping)
     max_force: float = 2.0  # N per vertex
 
     def __post_init__(self) -> None:

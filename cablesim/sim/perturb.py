@@ -50,7 +50,7 @@ def stable_damping(damping: float, mass: float, timestep: float) -> float:
     determinant ``1 - c dt / m``: above ``c dt / m = 2`` the step amplifies, and above 1 the
     damper alone reverses the vertex's velocity within a step.  The config's 3 N s/m on a
     4.3 g hose vertex over a 4 ms step is ``c dt / m = 2.8``: the pulled vertices rang at the
-    step's frequency up to the force cap (velocity reversed on 14 % of the steps, peaks of
+    step's frequency up to the force cap (velocity reversed on 14-24 % of the steps, peaks of
     1.5 m/s where the pull's own motion is about 0.05 m/s; on the table, where the mat's
     friction takes part, a perturbed rope's action took 0.6 s per step and failed).  Capped,
     ``c dt / m <= 1``: no reversal, the pull moves the vertex as drawn."""
