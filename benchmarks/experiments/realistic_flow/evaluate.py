@@ -206,6 +206,8 @@ SUPPORTS: dict[str, RefineParams | None] = {
     "fg-c3-w5": RefineParams(foreground=ForegroundParams(colour_px=3, window_m=0.05)),
     "fg-c3-w7": RefineParams(foreground=ForegroundParams(colour_px=3, window_m=0.07)),
     "fg-c3-h3": RefineParams(foreground=ForegroundParams(colour_px=3, min_height=0.003)),
+    # half a 2 mm thin wire's height: a wire lying on the table never stands the default 5 mm
+    "fg-c3-h1": RefineParams(foreground=ForegroundParams(colour_px=3, min_height=0.001)),
     "contrast": RefineParams(contrast=ContrastParams()),
     "fg&contrast": RefineParams(foreground=ForegroundParams(), contrast=ContrastParams()),
 }
