@@ -57,6 +57,14 @@ def expected(run: str) -> dict[str, Any]:
             f"no expected results for {here!r} (recorded: {', '.join(sorted(EXPECTED_ALL))}); "
             "record them with CABLESIM_PIN_RECORD=1 (see EXPECTED_FILE)"
         )
+    if run not in EXPECTED_ALL[here]:
+        # a run whose results a later change altered on purpose, re-recorded on another
+        # platform only (the README beside EXPECTED_FILE says which and why)
+        others = sorted(p for p, runs in EXPECTED_ALL.items() if run in runs)
+        pytest.skip(
+            f"no expected {run!r} results for {here!r} (recorded on: {', '.join(others)}); "
+            "record them with CABLESIM_PIN_RECORD=1 (see EXPECTED_FILE)"
+        )
     return EXPECTED_ALL[here][run]
 
 
