@@ -17,7 +17,6 @@ import json
 import time
 from pathlib import Path
 
-import mujoco
 import numpy as np
 
 from cablesim.cables import GARDEN_HOSE
@@ -37,7 +36,7 @@ from cablesim.frames import LABEL_BACKGROUND, LABEL_ROBOT
 from cablesim.sim.camera import SimCamera
 from cablesim.sim.config import BACKGROUNDS, SceneConfig
 from cablesim.sim.flow_gt import gt_flow
-from cablesim.sim.perturb import stable_damping
+from cablesim.sim.perturb import spring_force, stable_damping
 from cablesim.sim.settle import settle_world
 from cablesim.sim.world import World
 from cablesim.viz import (
@@ -107,13 +106,7 @@ def pull_hose(world, hose_index: int, distance: float, duration: float) -> dict:
     target = start + np.array([0.0, distance, 0.0])
     n_steps = int(round(duration / m.opt.timestep))
     for _ in range(n_steps):
-        vel = np.zeros(6)
-        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, vel, 0)
-        f = stiffness * (target - d.xpos[body]) - damping * vel[3:]
-        norm = np.linalg.norm(f)
-        if norm > max_force:
-            f *= max_force / norm
-        d.xfrc_applied[body, :3] = f
+        d.xfrc_applied[body, :3] = spring_force(m, d, body, target, stiffness, damping, max_force)
         world.step(1)
     return {
         "hose": hose_index,

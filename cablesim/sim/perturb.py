@@ -57,6 +57,27 @@ def stable_damping(damping: float, mass: float, timestep: float) -> float:
     return min(float(damping), float(mass) / float(timestep))
 
 
+def spring_force(
+    model: Any,
+    data: Any,
+    body: int,
+    target: np.ndarray,
+    stiffness: float,
+    damping: float,
+    max_force: float,
+) -> np.ndarray:
+    """The explicit pull on ``body`` towards ``target``: ``stiffness (target - x) - damping v``
+    (v the body's linear velocity), its norm capped at ``max_force`` (N).  Give it a damping
+    from :func:`stable_damping`.  Shared by the perturbation and ``cablesim scene``'s pull."""
+    vel = np.zeros(6)
+    mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, body, vel, 0)
+    f = stiffness * (target - data.xpos[body]) - damping * vel[3:]
+    norm = float(np.linalg.norm(f))
+    if norm > max_force:
+        f *= max_force / norm
+    return f
+
+
 @dataclass
 class _Pull:
     body: int
@@ -144,21 +165,17 @@ class NeighbourPerturbation:
         cfg = self.config
         m, d = world.model, world.data
         t = float(d.time) - self._t0
-        vel = np.zeros(6)
         for p in self._pulls:
             # ramp in over the first 0.2 s so the pull starts without a jolt
             ramp = min(1.0, t / 0.2)
             off = ramp * p.amplitude * math.sin(2 * math.pi * t / p.period + p.phase)
             target = p.rest + off * p.direction
-            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, p.body, vel, 0)
             # a vertex lighter than REFERENCE_MASS gets the gains and the cap in proportion to
             # its mass: the same pull per unit mass as the hose's; the damping stays stable
             s = p.scale
-            f = s * cfg.stiffness * (target - d.xpos[p.body]) - p.damping * vel[3:]
-            norm = float(np.linalg.norm(f))
-            if norm > s * cfg.max_force:
-                f *= s * cfg.max_force / norm
-            d.xfrc_applied[p.body, :3] = f
+            d.xfrc_applied[p.body, :3] = spring_force(
+                m, d, p.body, target, s * cfg.stiffness, p.damping, s * cfg.max_force
+            )
 
     def stop(self, world: Any) -> None:
         for p in self._pulls:
