@@ -17,7 +17,8 @@ import numpy as np
 
 #: How far the Panda's fingertips reach past the TCP along the hand's approach axis (m).
 FINGERTIP_REACH = 0.0095
-#: The gap (m) kept between the fingertips and a surface under the grasp.
+#: The gap (m) kept between the fingertips and a surface under the grasp (``Surface.clearance``
+#: unless a surface says otherwise).
 FINGERTIP_CLEARANCE = 0.0005
 
 
@@ -28,9 +29,10 @@ class Surface:
     ``-approach``) rather than in the image plane (on the board the two nearly agree, and the
     image plane is what the thesis used); ``height``: the world z of a horizontal surface
     under the grasp (None: none), which raises a grasp so that the fingertips stay
-    ``FINGERTIP_CLEARANCE`` above it; ``lift``: how far the hand lifts the grasped cable off
-    the surface (along -approach) before the actions, so that the fingertips do not drag on
-    it (measured on the table without it: the pads' friction on the mat held the hand 16 mm
+    ``clearance`` above it (the table's 0: they come down onto the mat, whose simulated
+    contact lets the finger pads in, ``cablesim.sim.world.YIELDING_BITS``); ``lift``: how far
+    the hand lifts the grasped cable off the surface (along -approach) before the actions, so
+    that the fingertips do not drag on it (measured on the table without it: the pads' friction on the mat held the hand 16 mm
     short of an action's target); ``faces_camera``: the surface lies behind the cables along
     the camera's view, so the nearest depths of a proposed segment are the cable's (the board;
     the exploration's ``front_filter`` relies on it), not the table seen obliquely, where depth
@@ -47,12 +49,13 @@ class Surface:
     lift: float = 0.0
     faces_camera: bool = False
     needs_slack: bool = False
+    clearance: float = FINGERTIP_CLEARANCE
 
     def grasp_centre(self, centre: np.ndarray) -> np.ndarray:
         """``centre`` (world), raised where the fingertips would otherwise touch the surface."""
         c = np.array(centre, float)
         if self.height is not None:
-            c[2] = max(c[2], self.height + FINGERTIP_REACH + FINGERTIP_CLEARANCE)
+            c[2] = max(c[2], self.height + FINGERTIP_REACH + self.clearance)
         return c
 
 
@@ -66,5 +69,6 @@ TABLE = Surface(
     height=0.0005,
     lift=0.01,
     needs_slack=True,
+    clearance=0.0,
 )
 SURFACES = {s.name: s for s in (BOARD, TABLE)}

@@ -43,6 +43,10 @@ class Obstacle:
     size: tuple[float, float, float]
     pos: tuple[float, float, float]
     quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    # the source geom's collision bits (the table scene's mat and table top let the finger
+    # pads in: cablesim.panda.model.PAD_CONTYPE)
+    contype: int = 1
+    conaffinity: int = 1
 
     @staticmethod
     def box(
@@ -96,7 +100,8 @@ def static_obstacles(
             pos = pos - half * normal
             gtype, size = int(mujoco.mjtGeom.mjGEOM_BOX), (sx, sy, half)
         name = model.geom(g).name or f"geom{g}"
-        out.append(Obstacle(name, gtype, size, tuple(pos), tuple(quat)))
+        bits = int(model.geom_contype[g]), int(model.geom_conaffinity[g])
+        out.append(Obstacle(name, gtype, size, tuple(pos), tuple(quat), *bits))
     return out
 
 
@@ -138,7 +143,7 @@ class ArmModel:
                 pos=list(ob.pos),
                 quat=list(ob.quat),
             )
-            g.contype, g.conaffinity, g.group = 1, 1, 3
+            g.contype, g.conaffinity, g.group = ob.contype, ob.conaffinity, 3
         self.obstacle_names = tuple(ob.name for ob in obstacles)
         # movable capsules for the hoses (set_hoses), each on a mocap body (the world body's
         # bounding volumes are computed once, at compile time): only the arm links collide

@@ -55,6 +55,12 @@ PAD = (0.12, 0.12, 0.12, 1.0)
 
 ROBOT_CONTYPE = 2
 ROBOT_CONAFFINITY = 1
+#: ``contype`` of the finger pads.  A geom meets a pad where its ``contype`` has bit 1 (the
+#: pads' ``conaffinity``) or its ``conaffinity`` bit 8, and meets the other robot geoms where
+#: its ``contype`` has bit 1 or its ``conaffinity`` bit 2.  Cables, the board and the sockets
+#: (1, 1) meet both; the table scene's mat and table top (16, 3:
+#: ``cablesim.sim.world.YIELDING_BITS``) meet the arm and the finger bodies but let the pads in.
+PAD_CONTYPE = 8
 ROBOT_GEOM_GROUP = 1
 
 # Body kinematics (pos, quat wxyz) from menagerie, and inertials (mass, com, fullinertia).
@@ -198,6 +204,7 @@ def _add_shape(
     friction: tuple = (1.0, 0.005, 0.0001),
     condim: int = 3,
     stiff: bool = False,
+    contype: int = ROBOT_CONTYPE,
 ) -> None:
     g = body.add_geom(name=name)
     if kind in ("cap", "cyl"):
@@ -209,7 +216,7 @@ def _add_shape(
         g.pos = list(where)
         g.size = list(size)
     g.rgba = list(rgba)
-    g.contype = ROBOT_CONTYPE
+    g.contype = contype
     g.conaffinity = ROBOT_CONAFFINITY
     g.group = ROBOT_GEOM_GROUP
     g.friction = list(friction)
@@ -298,6 +305,7 @@ def _add_hand(link7: mujoco.MjsBody, p: str) -> None:
             friction=(1.5, 0.01, 0.0002),
             condim=4,
             stiff=True,
+            contype=PAD_CONTYPE,
         )
 
 

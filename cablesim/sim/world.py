@@ -55,6 +55,11 @@ from cablesim.sim.table import (
 )
 
 CAMERA_NAME = "rgbd"
+#: Collision bits of the table scene's mat and table top: they touch the cables and the arm
+#: (``conaffinity`` 1 | 2) but not the finger pads (``PAD_CONTYPE``, conaffinity 1), so a
+#: grasp on the table may reach down to the mat (``TABLE.clearance``) as a compliant real hand
+#: does, without the pads' soft contact on a rigid mat jamming the closing fingers.
+YIELDING_BITS = ' contype="16" conaffinity="3"'
 _WARNINGS = (
     mujoco.mjtWarning.mjWARN_BADQPOS,
     mujoco.mjtWarning.mjWARN_BADQVEL,
@@ -169,8 +174,10 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     h = cfg.hoses
     R = look_at_frame(cam.position, cam.look_at)
     flexes, equalities = [], []
+    table_bits = ""
     if cfg.surface == "table":
         board_mat, board_geoms = _table_xml(cfg, hoses)
+        table_bits = YIELDING_BITS
     else:
         board_mat, board_geoms = _board_xml(cfg, hoses)
     light = _lighting(cfg)
@@ -241,7 +248,7 @@ def _scene_xml(cfg: SceneConfig, hoses: list[HoseSpec], cam: CameraPose) -> str:
     <light name="key" pos="-0.6 -0.4 2.2" dir="{light["dir"]}" directional="true" castshadow="false"
            diffuse="{light["key"]}" specular="0.1 0.1 0.1"/>
     <geom name="floor" type="plane" size="3 3 0.1" pos="0 0 -0.75" material="floor" contype="0" conaffinity="0"/>
-    <geom name="table" type="box" size="0.75 0.85 0.02" pos="0.15 0 -0.02" material="table" friction="0.8"/>
+    <geom name="table" type="box" size="0.75 0.85 0.02" pos="0.15 0 -0.02" material="table" friction="0.8"{table_bits}/>
     {board_geoms}
     <camera name="{CAMERA_NAME}" mode="fixed" pos="{_fmt(cam.position)}" xyaxes="{_fmt(cam_xy)}"
             fovy="{cfg.camera.fovy}"/>
@@ -319,7 +326,7 @@ def _table_xml(cfg: SceneConfig, hoses: list) -> tuple[str, str]:
         f'<geom name="mat" type="box" size="{(x1 - x0) / 2 + m:.6g} {(y1 - y0) / 2 + m:.6g} '
         f'{(MAT_TOP + MAT_DEPTH) / 2:.6g}" pos="{(x0 + x1) / 2:.6g} {(y0 + y1) / 2:.6g} '
         f'{(MAT_TOP - MAT_DEPTH) / 2:.6g}" '
-        'material="mat" friction="0.8"/>'
+        f'material="mat" friction="0.8"{YIELDING_BITS}/>'
     ]
     hz = (t.socket_height + 0.012) / 2  # the socket box reaches 12 mm above a plug's centre
     for i, (x, y, yaw) in enumerate(t.connectors):

@@ -11,7 +11,13 @@ import pytest
 from cablesim.assets import path as asset_path
 from cablesim.errors import ConfigError
 from cablesim.panda.description import FORWARD_QPOS, HOME_QPOS
-from cablesim.panda.model import ROBOT_CONAFFINITY, ROBOT_CONTYPE, panda_spec, robot_body_ids
+from cablesim.panda.model import (
+    PAD_CONTYPE,
+    ROBOT_CONAFFINITY,
+    ROBOT_CONTYPE,
+    panda_spec,
+    robot_body_ids,
+)
 from cablesim.panda.visuals import HIDDEN_COLLISION_GROUP, VISUAL_GROUP, check_visual, mesh_parts
 from cablesim.sim.config import RobotConfig, SceneConfig
 
@@ -53,10 +59,14 @@ def test_meshes_are_visual_only_and_the_primitives_unchanged():
     hidden = np.flatnonzero(~visual)
     assert len(hidden) == prim.ngeom
     assert np.all(mesh.geom_group[hidden] == HIDDEN_COLLISION_GROUP)
-    for name in ("type", "size", "pos", "quat", "friction", "solref", "solimp", "priority"):
+    fields = ("type", "size", "pos", "quat", "friction", "solref", "solimp", "priority", "contype")
+    for name in fields:
         a, b = getattr(prim, f"geom_{name}"), getattr(mesh, f"geom_{name}")[hidden]
         assert np.array_equal(a, b), name
-    assert np.all(mesh.geom_contype[hidden] == ROBOT_CONTYPE)
+    pads = np.array([mesh.geom(int(g)).name.endswith("finger_pad") for g in hidden])
+    assert pads.sum() == 2  # the pads have their own contype (the table's mat lets them in)
+    assert np.all(mesh.geom_contype[hidden][pads] == PAD_CONTYPE)
+    assert np.all(mesh.geom_contype[hidden][~pads] == ROBOT_CONTYPE)
     assert np.all(mesh.geom_conaffinity[hidden] == ROBOT_CONAFFINITY)
     for name in ("body_mass", "body_inertia", "body_ipos", "body_iquat", "body_pos", "body_quat"):
         assert np.array_equal(getattr(prim, name), getattr(mesh, name)), name

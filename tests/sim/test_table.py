@@ -218,9 +218,10 @@ def test_actions_on_the_table_stay_in_its_plane() -> None:
     assert abs(on_board[2]) > 0.3  # the board keeps the image plane (the thesis's)
 
 
-def test_a_grasp_on_the_table_keeps_the_fingertips_above_it() -> None:
+def test_a_grasp_on_the_table_brings_the_fingertips_down_to_the_mat() -> None:
     low = np.array([0.3, -0.1, 0.001])  # a 2 mm wire's centre
-    assert TABLE.grasp_centre(low)[2] == pytest.approx(MAT_TOP + FINGERTIP_REACH + 0.0005)
+    assert TABLE.clearance == 0.0
+    assert TABLE.grasp_centre(low)[2] == pytest.approx(MAT_TOP + FINGERTIP_REACH)
     high = np.array([0.3, -0.1, 0.05])  # on top of a pile: as seen
     assert np.array_equal(TABLE.grasp_centre(high), high)
     assert np.array_equal(BOARD.grasp_centre(low), low)
@@ -259,6 +260,57 @@ def test_the_table_scene_settles_with_its_cables_lying_on_the_mat(table_world) -
     w.set_state(state)
     assert moved < 2.0 * w.cfg.physics.settle_speed, moved
     assert set(np.unique(labels)) >= {0, 1, 2}  # every cable in view
+
+
+def _collide(m, g1: int, g2: int) -> bool:
+    """MuJoCo's contype/conaffinity rule for a pair of geoms."""
+    return bool(
+        (m.geom_contype[g1] & m.geom_conaffinity[g2])
+        or (m.geom_contype[g2] & m.geom_conaffinity[g1])
+    )
+
+
+def test_the_finger_pads_reach_into_the_mat_but_nothing_else_does(table_world) -> None:
+    """The pads pass into the mat and the table top (a grasp on the table brings the
+    fingertips down to the mat, as a compliant hand does), while they still hold cables, and
+    the rest of the arm, the cables and the planner's arm model still meet the mat."""
+    import mujoco
+
+    from cablesim.panda.ik import static_obstacles
+    from cablesim.pose import grasp_pose
+    from cablesim.sim.sim_panda import SimPanda
+
+    w = table_world
+    m = w.model
+    gid = {m.geom(g).name: g for g in range(m.ngeom)}
+    pads = [g for n, g in gid.items() if n.endswith("finger_pad")]
+    bodies = [g for n, g in gid.items() if n.endswith("finger_body")]
+    assert len(pads) == 2 and len(bodies) == 2
+    for surface in ("mat", "table"):
+        assert not any(_collide(m, p, gid[surface]) for p in pads)
+        assert all(_collide(m, b, gid[surface]) for b in bodies)
+    flex = m.flex_contype[0], m.flex_conaffinity[0]
+    for g in pads + [gid["mat"], gid["table"]]:  # cables meet the pads and the mat
+        assert (flex[0] & m.geom_conaffinity[g]) or (m.geom_contype[g] & flex[1])
+
+    robot = SimPanda(w)
+    mat = next(o for o in static_obstacles(m, w.data) if o.name == "mat")
+    assert (mat.contype, mat.conaffinity) == (
+        m.geom_contype[gid["mat"]],
+        m.geom_conaffinity[gid["mat"]],
+    )
+    state = w.get_state()
+    try:
+        centre = np.array([0.45, 0.0, MAT_TOP + FINGERTIP_REACH])  # fingertips on the mat
+        for depth, refused in ((0.0, False), (0.001, False), (0.006, True)):
+            pose = grasp_pose(centre - [0, 0, depth], [0.0, 1.0, 0.0], TABLE.approach)
+            ok, reason = robot.check_reachable(pose)
+            assert ok is not refused, (depth, reason)
+            if refused:  # the finger bodies, 2.5 mm short of the fingertips, meet the mat
+                assert "finger_body" in reason and ("mat" in reason or "table" in reason), reason
+    finally:
+        w.set_state(state)
+        mujoco.mj_forward(m, w.data)
 
 
 def test_the_perturbation_pulls_in_the_tables_plane(table_world) -> None:
