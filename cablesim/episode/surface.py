@@ -32,8 +32,8 @@ class Surface:
     ``clearance`` above it (the table's 0: they come down onto the mat, whose simulated
     contact lets the finger pads in, ``cablesim.sim.world.YIELDING_BITS``); ``lift``: how far
     the hand lifts the grasped cable off the surface (along -approach) before the actions, so
-    that the fingertips do not drag on it (measured on the table without it: the pads' friction on the mat held the hand 16 mm
-    short of an action's target); ``faces_camera``: the surface lies behind the cables along
+    that the fingertips do not drag on it (measured on the table without it: the pads'
+    friction on the mat held the hand 16 mm short of an action's target); ``faces_camera``: the surface lies behind the cables along
     the camera's view, so the nearest depths of a proposed segment are the cable's (the board;
     the exploration's ``front_filter`` relies on it), not the table seen obliquely, where depth
     runs along a lying cable; ``needs_slack``: the cables lie on the surface, held along

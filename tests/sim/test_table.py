@@ -262,12 +262,11 @@ def test_the_table_scene_settles_with_its_cables_lying_on_the_mat(table_world) -
     assert set(np.unique(labels)) >= {0, 1, 2}  # every cable in view
 
 
-def _collide(m, g1: int, g2: int) -> bool:
-    """MuJoCo's contype/conaffinity rule for a pair of geoms."""
-    return bool(
-        (m.geom_contype[g1] & m.geom_conaffinity[g2])
-        or (m.geom_contype[g2] & m.geom_conaffinity[g1])
-    )
+def _collide(m, g1: int, g2: int | tuple[int, int]) -> bool:
+    """MuJoCo's contype/conaffinity rule for geom ``g1`` and geom ``g2`` (or a flex's bits,
+    ``(contype, conaffinity)``)."""
+    bits = (m.geom_contype[g2], m.geom_conaffinity[g2]) if isinstance(g2, int) else g2
+    return bool((m.geom_contype[g1] & bits[1]) or (bits[0] & m.geom_conaffinity[g1]))
 
 
 def test_the_finger_pads_reach_into_the_mat_but_nothing_else_does(table_world) -> None:
@@ -289,9 +288,9 @@ def test_the_finger_pads_reach_into_the_mat_but_nothing_else_does(table_world) -
     for surface in ("mat", "table"):
         assert not any(_collide(m, p, gid[surface]) for p in pads)
         assert all(_collide(m, b, gid[surface]) for b in bodies)
-    flex = m.flex_contype[0], m.flex_conaffinity[0]
+    flex = int(m.flex_contype[0]), int(m.flex_conaffinity[0])
     for g in pads + [gid["mat"], gid["table"]]:  # cables meet the pads and the mat
-        assert (flex[0] & m.geom_conaffinity[g]) or (m.geom_contype[g] & flex[1])
+        assert _collide(m, g, flex)
 
     robot = SimPanda(w)
     mat = next(o for o in static_obstacles(m, w.data) if o.name == "mat")
