@@ -14,7 +14,7 @@ prefix.  Robot geoms have ``contype=2, conaffinity=1``: they touch everything in
 has the default ``contype=conaffinity=1`` (table, board, hoses) but not each other.
 
 Public API: :func:`panda_spec`, :func:`attach_panda`, :class:`PandaNames`,
-:func:`robot_body_ids`, :func:`set_home`, :func:`set_grasp_force`; the numbers come from
+:func:`robot_body_ids`, :func:`set_home`, :func:`set_grasp_force`, :func:`reach_pads`; the numbers come from
 :mod:`cablesim.panda.description`.
 """
 
@@ -38,7 +38,7 @@ from cablesim.panda.description import (
     MAX_OPENING,
     TCP_OFFSET,
 )
-from cablesim.panda.visuals import add_mesh_visuals, check_visual
+from cablesim.panda.visuals import HIDDEN_COLLISION_GROUP, add_mesh_visuals, check_visual
 
 _KP = (4500.0, 4500.0, 3500.0, 3500.0, 2000.0, 2000.0, 2000.0)
 _TORQUE = (87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0)
@@ -226,6 +226,39 @@ def _add_shape(
         g.priority = 1
         g.solref = list(_FINGER_SOLREF)
         g.solimp = list(_FINGER_SOLIMP)
+
+
+def reach_pads(spec: mujoco.MjSpec, depth: float, prefix: str = "panda/") -> None:
+    """Lengthen both finger pads' collision boxes by ``depth`` (m) past the fingertips, where a
+    surface lets the pads in (the table scene's mat and table top, ``PAD_CONTYPE``).  The pads
+    look as before: each collision box moves to the hidden group 3 (as under mesh visuals) and
+    a visual-only copy of the pad as built (``{side}_finger_pad_visual``, no contacts, no mass)
+    takes its place in the picture and the labels.
+
+    Why: MuJoCo pushes a cable vertex out of a box through the face it lies nearest to.  A 2 mm
+    wire grasped on the mat lies with its centre 1 mm above the pads' lower edge, and its soft
+    contacts let it 0.7 mm into each pad; a solver step that presses it 1 mm deeper turns the
+    contact towards the lower face, and the wire is pushed out under the fingertips (traced on
+    table thin-wire seed 10710, docs/cables.md).  With the pads reaching below the tips that
+    face is ``depth`` further away and the contact keeps pushing the wire back between the
+    pads."""
+    if depth <= 0:
+        return
+    p = prefix
+    for side in ("left", "right"):
+        pad = spec.geom(f"{p}{side}_finger_pad")
+        look = spec.body(f"{p}{side}_finger").add_geom(name=f"{p}{side}_finger_pad_visual")
+        look.type = pad.type
+        look.pos = pad.pos.copy()
+        look.size = pad.size.copy()
+        look.rgba = pad.rgba.copy()
+        look.group = pad.group
+        look.contype = 0
+        look.conaffinity = 0
+        look.mass = 0.0
+        pad.group = HIDDEN_COLLISION_GROUP
+        pad.size = [pad.size[0], pad.size[1], pad.size[2] + depth / 2]
+        pad.pos = [pad.pos[0], pad.pos[1], pad.pos[2] + depth / 2]
 
 
 def finger_contact_geoms(model: mujoco.MjModel, prefix: str = "panda/") -> np.ndarray:

@@ -30,7 +30,7 @@ import numpy as np
 from cablesim.cables import CableKind
 from cablesim.episode.surface import SURFACES, Surface
 from cablesim.errors import PhysicsDivergedError
-from cablesim.panda.model import attach_panda, set_arm, set_finger_contact_dmax
+from cablesim.panda.model import attach_panda, reach_pads, set_arm, set_finger_contact_dmax
 from cablesim.panda.visuals import add_mesh_visuals_same_view
 from cablesim.seeding import stream
 from cablesim.sim import assets
@@ -477,6 +477,8 @@ class World:
             panda_base = (np.array(cfg.robot.base_position, float), np.array(quat))
             if cfg.robot.hand_board:
                 add_hand_board(spec, panda)
+            if cfg.surface == "table":  # the mat and the table top let the pads in
+                reach_pads(spec, cfg.table.pad_reach, prefix="panda/")
         try:
             model = spec.compile()
             if panda is not None and cfg.robot.visual == "mesh":

@@ -312,6 +312,69 @@ def test_the_finger_pads_reach_into_the_mat_but_nothing_else_does(table_world) -
         mujoco.mj_forward(m, w.data)
 
 
+def test_on_the_table_the_pads_collide_past_the_fingertips_and_look_as_built(table_world) -> None:
+    """The table scene's pads reach ``table.pad_reach`` past the fingertips (into the mat that
+    lets them in), hidden; a visual-only copy of each pad as built draws it.  The board's pads
+    are as built."""
+    from cablesim.panda.model import PAD_CONTYPE
+    from cablesim.sim.world import World
+
+    m = table_world.model
+    reach = table_world.cfg.table.pad_reach
+    assert reach == pytest.approx(0.003)
+    for side in ("left", "right"):
+        pad, look = m.geom(f"panda/{side}_finger_pad"), m.geom(f"panda/{side}_finger_pad_visual")
+        tip = look.pos[2] + look.size[2]
+        assert pad.pos[2] + pad.size[2] == pytest.approx(tip + reach, abs=1e-12)
+        assert pad.pos[2] - pad.size[2] == pytest.approx(look.pos[2] - look.size[2], abs=1e-12)
+        assert (pad.group[0], look.group[0]) == (3, 1)  # MuJoCo draws groups 0-2
+        assert m.geom_contype[look.id] == m.geom_conaffinity[look.id] == 0
+        assert m.geom_contype[pad.id] == PAD_CONTYPE
+    board = World.build(SceneConfig(seed=2).with_values({"physics.cache": False}), settle=False)
+    assert board.model.geom("panda/left_finger_pad").size[2] == pytest.approx(0.0152)
+    with pytest.raises(KeyError):
+        board.model.geom("panda/left_finger_pad_visual")
+    with pytest.raises(ConfigError, match="table.pad_reach"):
+        table(2, **{"table.pad_reach": -0.001})
+
+
+@pytest.mark.parametrize("reach", [0.0, 0.003])
+def test_a_wire_pressed_into_a_pad_is_pushed_back_between_the_pads(reach: float) -> None:
+    """MuJoCo pushes a cable vertex out of a box through the face nearest its centre.  A 2 mm
+    wire held on the mat lies 1 mm above the fingertips; pressed 1.2 mm into a pad, it is
+    pushed out through the pad's lower face, under the fingertips (the thin wire's failure on
+    the table, docs/cables.md), unless the pad reaches past the tips (``reach_pads``): then it
+    is pushed back across the pad's face, between the fingers."""
+    import mujoco
+
+    from cablesim.panda.model import panda_spec, reach_pads
+
+    spec = panda_spec(prefix="panda/")
+    reach_pads(spec, reach, prefix="panda/")
+    vertex = spec.worldbody.add_body(name="vertex", mocap=True)
+    vertex.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.001, 0, 0])
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    mujoco.mj_kinematics(m, d)
+    finger = m.body("panda/left_finger").id
+    R = d.xmat[finger].reshape(3, 3)  # the finger's y: across the pad's face; z: to the tip
+    d.mocap_pos[0] = d.xpos[finger] + R @ [0.0, 0.0012, 0.0545 - 0.001]
+    mujoco.mj_forward(m, d)
+    pad = m.geom("panda/left_finger_pad").id
+    normals = [
+        R.T @ d.contact[i].frame[:3]
+        for i in range(d.ncon)
+        if pad in (d.contact[i].geom1, d.contact[i].geom2)
+    ]
+    assert len(normals) == 1
+    across, down = abs(normals[0][1]), abs(normals[0][2])
+    if reach:
+        assert across == pytest.approx(1.0) and down < 1e-9
+    else:
+        assert down == pytest.approx(1.0) and across < 1e-9
+
+
 def test_the_perturbation_pulls_in_the_tables_plane(table_world) -> None:
     from cablesim.seeding import stream
     from cablesim.sim.config import PerturbConfig
