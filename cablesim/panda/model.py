@@ -14,8 +14,8 @@ prefix.  Robot geoms have ``contype=2, conaffinity=1``: they touch everything in
 has the default ``contype=conaffinity=1`` (table, board, hoses) but not each other.
 
 Public API: :func:`panda_spec`, :func:`attach_panda`, :class:`PandaNames`,
-:func:`robot_body_ids`, :func:`set_home`, :func:`set_grasp_force`, :func:`reach_pads`; the numbers come from
-:mod:`cablesim.panda.description`.
+:func:`robot_body_ids`, :func:`set_home`, :func:`set_grasp_force`, :func:`reach_pads`; the
+numbers come from :mod:`cablesim.panda.description`.
 """
 
 from __future__ import annotations
@@ -235,13 +235,14 @@ def reach_pads(spec: mujoco.MjSpec, depth: float, prefix: str = "panda/") -> Non
     a visual-only copy of the pad as built (``{side}_finger_pad_visual``, no contacts, no mass)
     takes its place in the picture and the labels.
 
-    Why: MuJoCo pushes a cable vertex out of a box through the face it lies nearest to.  A 2 mm
-    wire grasped on the mat lies with its centre 1 mm above the pads' lower edge, and its soft
-    contacts let it 0.7 mm into each pad; a solver step that presses it 1 mm deeper turns the
-    contact towards the lower face, and the wire is pushed out under the fingertips (traced on
-    table thin-wire seed 10710, docs/cables.md).  With the pads reaching below the tips that
-    face is ``depth`` further away and the contact keeps pushing the wire back between the
-    pads."""
+    Why: MuJoCo pushes a cable vertex whose centre has passed into a box out through the face
+    nearest that centre.  A 2 mm wire grasped on the mat lies with its centre 1 mm above the
+    pads' lower edge, and squeezed (its soft contacts let the pads 0.7 mm into it from each
+    side) each pad's face is about 0.3 mm from that centre; a solver step that carries the
+    centre more than 1 mm into a pad turns the contact towards the lower face, and the wire is
+    pushed out under the fingertips (traced on table thin-wire seed 10710, docs/cables.md).
+    With the pads reaching below the tips that face is ``depth`` further away, and the contact
+    pushes the wire back between the pads."""
     if depth <= 0:
         return
     p = prefix
