@@ -94,9 +94,9 @@ PINNED: dict[str, dict[str, dict[str, str]]] = {
 }
 #: case -> SHA-256 of the run's ``config`` (the same on every platform)
 PINNED_CONFIG: dict[str, str] = {
-    "seed1_not_held": "c7bd0fa815b520b5f4bffe9161b1802104c162dea56ec5fd44a029e118453e8b",
-    "seed2_push": "9d43580bc69aada0e8aea9972611e77116d6319d9054eda6db3c8b13a51be40b",
-    "seed3_sampler": "68aeba542cf72bae68e206435ed1f6bf86a907e0161321e3d3473719561822f7",
+    "seed1_not_held": "2bc485dd68e0bcd156bf2b43a5078f75b29963663c9b67946c2aab9164528b53",
+    "seed2_push": "0d30959da9441a8c514d006210f23426ddafa165e6d5085313fc95fa9c5299e4",
+    "seed3_sampler": "c87d6d319201b6538e44325b73459263e83ec6af623dc69c3d3626a37c8954e7",
 }
 DEMO_ARGS = ["--seed", "0"]  # the README's demo: cablesim explore --seed 0 --out runs/demo
 DEMO_METRICS = Path(__file__).parent / "data" / "readme_demo_metrics.json"
