@@ -24,20 +24,20 @@ FINGERTIP_CLEARANCE = 0.0005
 
 @dataclass(frozen=True)
 class Surface:
-    """``approach``: the hand's approach direction (world, towards the surface);
-    ``in_plane``: the actions ``along`` and ``across`` move in the surface's plane (normal
-    ``-approach``) rather than in the image plane (on the board the two nearly agree, and the
-    image plane is what the thesis used); ``height``: the world z of a horizontal surface
-    under the grasp (None: none), which raises a grasp so that the fingertips stay
-    ``clearance`` above it (the table's 0: they come down onto the mat, whose simulated
-    contact lets the finger pads in, ``cablesim.sim.world.YIELDING_BITS``); ``lift``: how far
-    the hand lifts the grasped cable off the surface (along -approach) before the actions, so
-    that the fingertips do not drag on it (measured on the table without it: the pads'
-    friction on the mat held the hand 16 mm short of an action's target); ``faces_camera``: the surface lies behind the cables along
-    the camera's view, so the nearest depths of a proposed segment are the cable's (the board;
-    the exploration's ``front_filter`` relies on it), not the table seen obliquely, where depth
-    runs along a lying cable; ``needs_slack``: the cables lie on the surface, held along
-    their length by friction, so a grasp needs slack between it and each plugged end
+    """``approach``: the hand's approach direction (world, towards the surface); ``in_plane``:
+    the actions ``along`` and ``across`` move in the surface's plane (normal ``-approach``)
+    rather than in the image plane (on the board the two nearly agree, and the image plane is
+    what the thesis used); ``height``: the world z of a horizontal surface under the grasp
+    (None: none), which raises a grasp so that the fingertips stay ``clearance`` above it (the
+    table's 0: they come down onto the mat, whose simulated contact lets the finger pads in,
+    ``cablesim.sim.world.YIELDING_BITS``); ``lift``: how far the hand lifts the grasped cable
+    off the surface (along -approach) before the actions, so that the fingertips do not drag on
+    it (measured on the table without it: the pads' friction on the mat held the hand 16 mm
+    short of an action's target); ``faces_camera``: the surface lies behind the cables along the
+    camera's view, so the nearest depths of a proposed segment are the cable's (the board; the
+    exploration's ``front_filter`` relies on it), not the table seen obliquely, where depth runs
+    along a lying cable; ``needs_slack``: the cables lie on the surface, held along their length
+    by friction, so a grasp needs slack between it and each plugged end
     (:func:`cablesim.sim.picker.slack_to_plugged_ends`)."""
 
     name: str

@@ -331,7 +331,8 @@ def test_on_the_table_the_pads_collide_past_the_fingertips_and_look_as_built(tab
         assert m.geom_contype[look.id] == m.geom_conaffinity[look.id] == 0
         assert m.geom_contype[pad.id] == PAD_CONTYPE
     board = World.build(SceneConfig(seed=2).with_values({"physics.cache": False}), settle=False)
-    assert board.model.geom("panda/left_finger_pad").size[2] == pytest.approx(0.0152)
+    as_built = m.geom("panda/left_finger_pad_visual")
+    assert np.array_equal(board.model.geom("panda/left_finger_pad").size, as_built.size)
     with pytest.raises(KeyError):
         board.model.geom("panda/left_finger_pad_visual")
     with pytest.raises(ConfigError, match="table.pad_reach"):
@@ -350,6 +351,8 @@ def test_a_wire_pressed_into_a_pad_is_pushed_back_between_the_pads(reach: float)
     from cablesim.panda.model import panda_spec, reach_pads
 
     spec = panda_spec(prefix="panda/")
+    built = spec.geom("panda/left_finger_pad")
+    tip = built.pos[2] + built.size[2]  # the fingertip along the finger's z
     reach_pads(spec, reach, prefix="panda/")
     vertex = spec.worldbody.add_body(name="vertex", mocap=True)
     vertex.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.001, 0, 0])
@@ -359,7 +362,7 @@ def test_a_wire_pressed_into_a_pad_is_pushed_back_between_the_pads(reach: float)
     mujoco.mj_kinematics(m, d)
     finger = m.body("panda/left_finger").id
     R = d.xmat[finger].reshape(3, 3)  # the finger's y: across the pad's face; z: to the tip
-    d.mocap_pos[0] = d.xpos[finger] + R @ [0.0, 0.0012, 0.0545 - 0.001]
+    d.mocap_pos[0] = d.xpos[finger] + R @ [0.0, 0.0012, tip - 0.001]
     mujoco.mj_forward(m, d)
     pad = m.geom("panda/left_finger_pad").id
     normals = [
