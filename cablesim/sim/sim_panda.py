@@ -158,6 +158,12 @@ class SimPanda(ArmModelChecks, Robot):
             base_pos, base_quat, obstacles, hose_capsules=capsules, hose_radius=radii
         )
         self._closed = False  # the fingers were closed (grasp) and not opened since
+        self._grip_kp = float(m.actuator_gainprm[self._gripper, 0])
+        self._grip_command = float(d.ctrl[self._gripper])  # what the gripper was told
+        self._grip_written = self._grip_command  # what the force limit last left in ctrl
+        controllers = getattr(world, "controllers", None)
+        if controllers is not None:  # the latest robot on a world drives its gripper
+            controllers["gripper"] = self._limit_gripper_force
         self._vertex_bodies = np.unique(m.flex_vertbodyid[m.flex_vertbodyid > 0])
         self.last_plan: list[np.ndarray] = []
 
@@ -352,11 +358,37 @@ class SimPanda(ArmModelChecks, Robot):
                 touched.update(int(g) for g in c.geom if g in self._pad_geoms)
         return len(touched) == 2
 
+    def _gripper_command(self) -> float:
+        """The gripper's command (m): ``ctrl`` as last set, not as the force limit left it."""
+        c = float(self.world.data.ctrl[self._gripper])
+        return self._grip_command if c == self._grip_written else c
+
+    def _limit_gripper_force(self, world: SimWorld) -> None:
+        """The gripper's firmware, run at the start of every physics step: the command never
+        asks for more than the grasp force, i.e. it stays within ``force / kp`` (14 mm at 70 N)
+        of the opening.  The position servo's force then never reaches its clamp
+        (``forcerange``) while the fingers close, and MuJoCo keeps integrating the gripper's
+        damping implicitly.  A clamped force has no velocity derivative: fingers held 15 mm
+        apart by a cable that then leaves them were driven at 70 N with no damping for a step,
+        7.7 m/s in 4 ms, and passed through each other (-13.9 mm, table garden hose seed
+        14216; docs/cables.md).  Within 14 mm of the opening the command is left as it is,
+        bit for bit."""
+        d = world.data
+        g = self._gripper
+        command = self._gripper_command()
+        self._grip_command = command
+        opening = float(d.qpos[self._finger_qadr[0]] + d.qpos[self._finger_qadr[1]])
+        floor = opening + float(world.model.actuator_forcerange[g, 0]) / self._grip_kp
+        ctrl = command if command >= floor else floor
+        if ctrl != d.ctrl[g]:
+            d.ctrl[g] = ctrl
+        self._grip_written = ctrl
+
     def _drive_gripper(self, target: float, speed: float) -> None:
         """Ramp the gripper command at ``speed`` (m/s), then wait until the fingers stop."""
         w, d = self.world, self.world.data
         dt = self.dt
-        start = float(d.ctrl[self._gripper])
+        start = self._gripper_command()
         ramp = max(1, math.ceil(abs(target - start) / max(speed, 1e-3) / dt))
         for k in range(1, ramp + 1):
             d.ctrl[self._gripper] = start + (target - start) * k / ramp

@@ -12,6 +12,10 @@ each gets the world.  The camera clock and the neighbour perturbation are such h
     with world.hooks(after=[on_step]):
         robot.move_to(pose)                    # on_step(world) after every physics step
 
+A device's own firmware is a controller instead (``world.controllers``, by name): it runs at
+the start of every step however the world is stepped, as the simulated gripper's force limit
+(``cablesim.sim.sim_panda``) does.
+
 Each hose is a MuJoCo 4.0 1D ``flexcomp`` (rod elasticity, integrator ``discrete``).  The rod is
 built straight (its rest shape), then bent into its start shape through the vertex joints; a
 far end attached to a second connector is held by a ``connect`` equality (SPEC section 9).
@@ -454,6 +458,9 @@ class World:
         self._step_state = np.empty(mujoco.mj_stateSize(model, _STATE))
         self.before_step: list[StepHook] = []
         self.after_step: list[StepHook] = []
+        # a device's own controllers, by name, run at the start of every physics step (inside
+        # ``step``'s divergence checks, unlike the hooks): the simulated gripper's force limit
+        self.controllers: dict[str, StepHook] = {}
 
     # ------------------------------------------------------------------ building
     @classmethod
@@ -584,6 +591,8 @@ class World:
         until a dense step leaves every edge stretched by less than the resolved
         ``physics.rescue_release`` (the table's 0.1; the board runs the whole rescue)."""
         m, d = self.model, self.data
+        for controller in self.controllers.values():
+            controller(self)
         if self._rescue_steps == 0:
             rescue = self.cfg.physics.rescue_strain > 0 and len(self._edge_length0) > 0
             mujoco.mj_getState(m, d, self._step_state, _STATE)

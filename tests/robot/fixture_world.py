@@ -38,6 +38,7 @@ class FixtureWorld:
     """Exposes what SimPanda needs: model, data, step, T_world_camera, panda, panda_base."""
 
     def __init__(self, base_pos=(0.0, 0.0, 0.0), base_quat=(1.0, 0.0, 0.0, 0.0)):
+        self.controllers: dict = {}
         spec = mujoco.MjSpec.from_string(_XML)
         self.panda = attach_panda(spec, base_pos, base_quat)
         self.panda_base = (tuple(base_pos), tuple(base_quat))
@@ -54,6 +55,8 @@ class FixtureWorld:
 
     def step(self, n: int = 1) -> None:
         for _ in range(n):
+            for controller in self.controllers.values():  # as World's: the gripper's limit
+                controller(self)
             mujoco.mj_step(self.model, self.data)
         if not np.isfinite(self.data.qpos).all():
             raise PhysicsDivergedError("NaN in qpos")

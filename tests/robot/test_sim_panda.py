@@ -108,6 +108,50 @@ def test_an_empty_hand_closed_for_a_thin_wire_holds_nothing(robot: SimPanda):
     assert not robot._pads_on_cable()
 
 
+def _let_go(robot: SimPanda, opening: float, steps: int = 100) -> np.ndarray:
+    """Fingers held ``opening`` apart, then the command at 0 with nothing between them (a
+    cable that left the closed hand); the opening after each of ``steps`` 4 ms steps."""
+    w = robot.world
+    w.model.opt.timestep = 0.004  # the scenes' step (the fixture's is 2 ms)
+    assert robot.open(opening)
+    w.data.ctrl[robot._gripper] = 0.0
+    out = []
+    for _ in range(steps):
+        w.step(1)
+        out.append(robot.gripper_opening)
+    return np.asarray(out)
+
+
+def test_fingers_a_cable_leaves_close_without_passing_through_each_other(robot: SimPanda):
+    """Let go 15 mm apart, the servo asks 75 N: clamped to the 70 N grasp force, MuJoCo drops
+    the gripper's damping for the step, and the fingers passed through each other in one 4 ms
+    step (-15.7 mm, resting crossed at -13.9 mm: table garden hose seed 14216).  The
+    gripper's force limit keeps the command within 14 mm of the opening: they close at about
+    0.5 m/s, stop on each other, and open again."""
+    opening = _let_go(robot, 0.015)
+    rate = np.diff(np.concatenate([[0.015], opening])) / 0.004
+    assert opening.min() > -0.0005, opening.min()
+    assert abs(opening[-1]) < 0.0005
+    assert rate.min() > -1.0, rate.min()
+    assert robot.open()
+    assert robot.gripper_opening > 0.07
+    del robot.world.controllers["gripper"]  # without the limit: the crossing it prevents
+    assert _let_go(robot, 0.015).min() < -0.01
+
+
+def test_the_gripper_force_limit_leaves_a_command_within_the_force_bit_for_bit():
+    """Within 14 mm of the opening (70 N / 5000 N/m) the limit does not touch the command:
+    fingers let go 13 mm apart move the same with and without it, bit for bit."""
+    runs = []
+    for limit in (True, False):
+        robot = SimPanda(FixtureWorld())
+        if not limit:
+            del robot.world.controllers["gripper"]
+        runs.append(_let_go(robot, 0.013, steps=50))
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert runs[0][-1] < 0.0005
+
+
 def test_the_finger_pads_stop_each_other(robot: SimPanda):
     """The pads touch, as on the real hand: pushed together by 70 N per finger on top of the
     gripper's own closing force, the closed fingers give way by well under a millimetre; with the pads' contact switched off (its
