@@ -40,6 +40,11 @@ from cablesim.robot.base import MoveResult, Robot
 
 #: Velocity feed-forward through the position target: kv / kp of the joint actuators.
 _KV_OVER_KP = 0.1
+#: The Franka Hand's top speed (m/s of opening; frankx ``Gripper.max_speed``): the gripper's
+#: force limit (``SimPanda._limit_gripper_force``) lets the servo make up its damping up to it.
+GRIPPER_MAX_SPEED = 0.1
+#: The share of the grasp force the force limit keeps below the actuator's clamp.
+_FORCE_MARGIN = 1e-3
 
 
 class SimWorld(Protocol):
@@ -159,6 +164,7 @@ class SimPanda(ArmModelChecks, Robot):
         )
         self._closed = False  # the fingers were closed (grasp) and not opened since
         self._grip_kp = float(m.actuator_gainprm[self._gripper, 0])
+        self._grip_kv = -float(m.actuator_biasprm[self._gripper, 2])
         self._grip_command = float(d.ctrl[self._gripper])  # what the gripper was told
         self._grip_written = self._grip_command  # what the force limit last left in ctrl
         controllers = getattr(world, "controllers", None)
@@ -366,19 +372,26 @@ class SimPanda(ArmModelChecks, Robot):
     def _limit_gripper_force(self, world: SimWorld) -> None:
         """The gripper's firmware, run at the start of every physics step: the command never
         asks for more than the grasp force, i.e. it stays within ``force / kp`` (14 mm at 70 N)
-        of the opening.  The position servo's force then never reaches its clamp
-        (``forcerange``) while the fingers close, and MuJoCo keeps integrating the gripper's
-        damping implicitly.  A clamped force has no velocity derivative: fingers held 15 mm
+        of the opening, plus what the damping takes at the closing speed up to
+        :data:`GRIPPER_MAX_SPEED`.  The position servo's force then does not reach its clamp
+        (``forcerange``) while the fingers close, MuJoCo keeps integrating the gripper's
+        damping implicitly, and fingers that close faster than the hand can are braked.  A clamped force has no velocity derivative: fingers held 15 mm
         apart by a cable that then leaves them were driven at 70 N with no damping for a step,
         7.7 m/s in 4 ms, and passed through each other (-13.9 mm, table garden hose seed
-        14216; docs/cables.md).  Within 14 mm of the opening the command is left as it is,
-        bit for bit."""
+        14216; docs/cables.md).  A command within that reach of the opening is left as it
+        is, bit for bit."""
         d = world.data
         g = self._gripper
         command = self._gripper_command()
         self._grip_command = command
         opening = float(d.qpos[self._finger_qadr[0]] + d.qpos[self._finger_qadr[1]])
-        floor = opening + float(world.model.actuator_forcerange[g, 0]) / self._grip_kp
+        closing = -float(d.qvel[self._finger_dofadr[0]] + d.qvel[self._finger_dofadr[1]])
+        # the force (a hair inside the clamp, where MuJoCo would drop the damping's derivative
+        # again), plus what the damping takes at the closing speed up to the hand's top speed:
+        # a weak grasp still closes as fast as commanded, faster fingers are braked
+        force = -float(world.model.actuator_forcerange[g, 0]) * (1.0 - _FORCE_MARGIN)
+        push = max(0.0, force + self._grip_kv * min(closing, GRIPPER_MAX_SPEED))
+        floor = opening - push / self._grip_kp
         ctrl = command if command >= floor else floor
         if ctrl != d.ctrl[g]:
             d.ctrl[g] = ctrl
