@@ -375,26 +375,22 @@ class SimPanda(ArmModelChecks, Robot):
         of the opening, plus what the damping takes at the closing speed up to
         :data:`GRIPPER_MAX_SPEED`.  The position servo's force then does not reach its clamp
         (``forcerange``) while the fingers close, MuJoCo keeps integrating the gripper's
-        damping implicitly, and fingers that close faster than the hand can are braked.  A clamped force has no velocity derivative: fingers held 15 mm
-        apart by a cable that then leaves them were driven at 70 N with no damping for a step,
-        7.7 m/s in 4 ms, and passed through each other (-13.9 mm, table garden hose seed
-        14216; docs/cables.md).  A command within that reach of the opening is left as it
-        is, bit for bit."""
+        damping implicitly, and fingers that close faster than the hand can are braked.  A
+        clamped force has no velocity derivative: fingers held 15 mm apart by a cable that then
+        leaves them were driven at 70 N with no damping for a step, 7.7 m/s in 4 ms, and passed
+        through each other (-13.9 mm, table garden hose seed 14216; docs/cables.md).  A command
+        within that reach of the opening is left as it is, bit for bit."""
         d = world.data
         g = self._gripper
-        command = self._gripper_command()
-        self._grip_command = command
-        opening = float(d.qpos[self._finger_qadr[0]] + d.qpos[self._finger_qadr[1]])
+        self._grip_command = self._gripper_command()
         closing = -float(d.qvel[self._finger_dofadr[0]] + d.qvel[self._finger_dofadr[1]])
         # the force (a hair inside the clamp, where MuJoCo would drop the damping's derivative
         # again), plus what the damping takes at the closing speed up to the hand's top speed:
         # a weak grasp still closes as fast as commanded, faster fingers are braked
         force = -float(world.model.actuator_forcerange[g, 0]) * (1.0 - _FORCE_MARGIN)
         push = max(0.0, force + self._grip_kv * min(closing, GRIPPER_MAX_SPEED))
-        floor = opening - push / self._grip_kp
-        ctrl = command if command >= floor else floor
-        if ctrl != d.ctrl[g]:
-            d.ctrl[g] = ctrl
+        ctrl = max(self._grip_command, self.gripper_opening - push / self._grip_kp)
+        d.ctrl[g] = ctrl
         self._grip_written = ctrl
 
     def _drive_gripper(self, target: float, speed: float) -> None:
