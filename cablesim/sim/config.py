@@ -76,6 +76,17 @@ SURFACE_RESCUE_RELEASE: Mapping[str, float] = {"board": 0.0, "table": 0.1}
 #: Newton (board seeds 1 and 3 at their start; not looked into further).
 SURFACE_RESCUE_DEPTH: Mapping[str, float] = {"board": 0.0, "table": 0.003}
 
+#: Each surface's ``physics.rescue_residual`` (m/s^2), where it is None: the table's 3000; off
+#: on the board (whose pinned runs it would change, and where the failure was not traced).
+#: Measured over a whole table thin-wire interaction (seed 14139, 7018 sparse Newton steps):
+#: a cable vertex's equation of motion is off by a median 0.04 m/s^2 and by more than 83
+#: m/s^2 in 1 % of the steps, most of them the failure itself: up to 6.8e5 m/s^2 while a
+#: stretch of wire 16 cm from the grasp fell through the mat and pulled the wire out of the
+#: fingers (docs/cables.md, "Table, thin wire").  At 300 the check fired 348 times there (the
+#: dense Newton's own steps are off by 150-1400 m/s^2) and the interaction took 8x the CPU; at
+#: 3000 twice, and the grasp held at 47 s of CPU against 53 s as built.
+SURFACE_RESCUE_RESIDUAL: Mapping[str, float] = {"board": 0.0, "table": 3000.0}
+
 # Sanity bounds that keep MuJoCo away from degenerate models (the table top is the box
 # x in [TABLE_X[0], TABLE_X[1]], |y| <= TABLE_HALF_WIDTH; see cablesim.sim.world).
 TABLE_X = (-0.6, 0.9)
@@ -690,6 +701,13 @@ class PhysicsConfig(Config):
     # (to 9.9 and 4.9 mm) and the hose went through the table (docs/cables.md, "Cables sinking
     # into the table")
     rescue_depth: float | None = None
+    # m/s^2: a step after which a cable vertex's equation of motion is off by more than this
+    # (|M qacc - forces| over the vertex's mass: MuJoCo 4.0's sparse Newton can report
+    # convergence in one to three iterations and leave a vertex accelerating through the mat
+    # with its contact forces unbalanced) starts a rescue as a stretched edge does.  0 turns
+    # it off; None: the surface's (:data:`SURFACE_RESCUE_RESIDUAL`, resolved by
+    # ``SceneConfig.rescue_residual()``: the table's 3000, off on the board).
+    rescue_residual: float | None = None
     # MuJoCo's sleeping islands: > 0 turns them on with this velocity tolerance (m/s on the
     # hoses' vertex joints, rad/s on hinges).  An island (bodies joined by constraints:
     # a hose's edges, contacts, its end couplings) whose every degree of freedom stays
@@ -719,6 +737,8 @@ class PhysicsConfig(Config):
         check_positive("physics.rescue_time", self.rescue_time)
         if self.rescue_depth is not None:
             check_number("physics.rescue_depth", self.rescue_depth, 0.0, 0.05)
+        if self.rescue_residual is not None:
+            check_number("physics.rescue_residual", self.rescue_residual, 0.0, 1e9)
         check_positive("physics.sleep_tolerance", self.sleep_tolerance, allow_zero=True)
         check_number("physics.sleep_tolerance", self.sleep_tolerance, hi=1.0)
         if self.impratio is not None:
@@ -829,6 +849,11 @@ class SceneConfig(Config):
         """``physics.rescue_depth``, or the surface's where None."""
         r = self.physics.rescue_depth
         return SURFACE_RESCUE_DEPTH[self.surface] if r is None else float(r)
+
+    def rescue_residual(self) -> float:
+        """``physics.rescue_residual``, or the surface's where None."""
+        r = self.physics.rescue_residual
+        return SURFACE_RESCUE_RESIDUAL[self.surface] if r is None else float(r)
 
     def rescue_release(self) -> float:
         """``physics.rescue_release``, or the surface's where None."""

@@ -404,6 +404,17 @@ def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose]) -> None:
         damp_cable_dofs(model, js, hose.spec.cable)
 
 
+def _flex_vertex_dofs(model: mujoco.MjModel, flex_ids: list[int]) -> np.ndarray:
+    """The degrees of freedom of the vertices of the flexes ``flex_ids``, in order."""
+    dofs: list[int] = []
+    for f in flex_ids:
+        adr, num = int(model.flex_vertadr[f]), int(model.flex_vertnum[f])
+        for b in model.flex_vertbodyid[adr : adr + num]:
+            a = int(model.body_dofadr[b])
+            dofs.extend(range(a, a + int(model.body_dofnum[b])))
+    return np.asarray(dofs, dtype=int)
+
+
 class World:
     """A compiled, settled scene.  Build with ``World.build(cfg)``."""
 
@@ -455,6 +466,12 @@ class World:
             if gid >= 0:
                 self._surface_geom[gid] = True
         self._last_depth = 0.0  # the deepest a hose lay in a surface after the last step
+        # a cable vertex whose equation of motion the solver left this far off (m/s^2) starts
+        # a rescue too (see _unsolved); 0: never
+        self._rescue_residual = cfg.rescue_residual()
+        self._vertex_dofs = _flex_vertex_dofs(model, [h.flex_id for h in hoses])
+        self._vertex_mass = model.dof_M0[self._vertex_dofs].copy()
+        self._Mqacc = np.zeros(model.nv)
         self._step_state = np.empty(mujoco.mj_stateSize(model, _STATE))
         self.before_step: list[StepHook] = []
         self.after_step: list[StepHook] = []
@@ -585,7 +602,9 @@ class World:
         than that (a taut hose held by the arm, where CG at its iteration cap and the sparse
         Newton both stop short of the solution and the hose can run away), or with
         ``physics.rescue_depth`` > 0 leaves a hose sunk deeper than that into the table, the
-        board or the mat (see :meth:`_sinking`), the step is redone
+        board or the mat (see :meth:`_sinking`), or with ``physics.rescue_residual`` > 0
+        leaves a cable vertex's equation of motion unsolved (see :meth:`_unsolved`), the step
+        is redone
         with Newton on a dense Jacobian, which converges in a few iterations there, and the
         dense Newton goes on for ``physics.rescue_time`` (16 ms per step instead of ~2), or
         until a dense step leaves every edge stretched by less than the resolved
@@ -601,7 +620,7 @@ class World:
                 return None
             strain = self.hose_stretch()
             sinking = self._sinking()
-            if not (strain.max() > self.cfg.physics.rescue_strain or sinking):
+            if not (strain.max() > self.cfg.physics.rescue_strain or sinking or self._unsolved()):
                 return strain
             # redo the step from the saved state, and go on, with the dense Newton
             mujoco.mj_setState(m, d, self._step_state, _STATE)
@@ -659,6 +678,25 @@ class World:
         before, self._last_depth = self._last_depth, depth
         sunk = depth - before > SINK_SPEED * self.model.opt.timestep
         return depth > self._rescue_depth and sunk
+
+    def _unsolved(self) -> bool:
+        """Whether the last step left a cable vertex's equation of motion off by more than
+        ``physics.rescue_residual``: |M qacc - qfrc_smooth - qfrc_constraint| over the
+        vertex's mass, the gradient the constraint solver drives to zero.  MuJoCo 4.0's
+        sparse Newton can stop after one to three iterations with it large on a few light
+        vertices (a thin-wire vertex weighs 0.2 g; perhaps because its tolerance is scaled by
+        the mean inertia of the whole model, arm included: not verified).  Traced on table thin-wire seed 14139:
+        a stretch of wire lying on the mat 16 cm from the grasp accelerated down through it at
+        about 5 m/s^2 with its contact forces rising to 1.9 N unanswered (residual up to 6.8e5
+        m/s^2), an edge beside it stretched 22 %, and the pull took the wire out of the
+        fingers; in normal steps the residual is a median 0.04 m/s^2."""
+        if self._rescue_residual <= 0 or len(self._vertex_dofs) == 0:
+            return False
+        m, d = self.model, self.data
+        mujoco.mj_mulM(m, d, self._Mqacc, d.qacc)
+        i = self._vertex_dofs
+        r = self._Mqacc[i] - d.qfrc_smooth[i] - d.qfrc_constraint[i]
+        return bool(np.max(np.abs(r) / self._vertex_mass) > self._rescue_residual)
 
     def _plain_step(self) -> None:
         """One step with the configured solver and the CG fallback (state saved by the caller
