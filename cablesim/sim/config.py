@@ -82,9 +82,12 @@ SURFACE_RESCUE_DEPTH: Mapping[str, float] = {"board": 0.0, "table": 0.003}
 #: a cable vertex's equation of motion is off by a median 0.04 m/s^2 and by more than 83
 #: m/s^2 in 1 % of the steps, most of them the failure itself: up to 6.8e5 m/s^2 while a
 #: stretch of wire 16 cm from the grasp fell through the mat and pulled the wire out of the
-#: fingers (docs/cables.md, "Table, thin wire").  At 300 the check fired 348 times there (the
-#: dense Newton's own steps are off by 150-1400 m/s^2) and the interaction took 8x the CPU; at
-#: 3000 twice, and the grasp held at 47 s of CPU against 53 s as built.
+#: fingers (docs/cables.md, "Table, thin wire").  CG's steps there are off by at most 601
+#: m/s^2.  Sent straight to the dense-Newton rescue, at 300 the check fired 348 times (the dense
+#: Newton's own steps are off by 150-1400 m/s^2: 8x the CPU), at 3000 twice, but on seed 14600
+#: it fired step after step (not ended after 4.5 min of CPU, against 59 s as built); redone with
+#: CG first, both seeds
+#: held with no rescue at 49 and 46 s of CPU (53 and 59 s as built).
 SURFACE_RESCUE_RESIDUAL: Mapping[str, float] = {"board": 0.0, "table": 3000.0}
 
 # Sanity bounds that keep MuJoCo away from degenerate models (the table top is the box
@@ -701,11 +704,12 @@ class PhysicsConfig(Config):
     # (to 9.9 and 4.9 mm) and the hose went through the table (docs/cables.md, "Cables sinking
     # into the table")
     rescue_depth: float | None = None
-    # m/s^2: a step after which a cable vertex's equation of motion is off by more than this
-    # (|M qacc - forces| over the vertex's mass: MuJoCo 4.0's sparse Newton can report
-    # convergence in one to three iterations and leave a vertex accelerating through the mat
-    # with its contact forces unbalanced) starts a rescue as a stretched edge does.  0 turns
-    # it off; None: the surface's (:data:`SURFACE_RESCUE_RESIDUAL`, resolved by
+    # m/s^2: a sparse-Newton step after which a cable vertex's equation of motion is off by
+    # more than this (|M qacc - forces| over the vertex's mass: MuJoCo 4.0's sparse Newton
+    # can report convergence in one to three iterations and leave a vertex accelerating
+    # through the mat with its contact forces unbalanced) is redone with CG, which stands in
+    # for ``fallback_time`` as after a Newton stall; a step CG leaves that far off starts a
+    # rescue as a stretched edge does.  0 turns it off; None: the surface's (:data:`SURFACE_RESCUE_RESIDUAL`, resolved by
     # ``SceneConfig.rescue_residual()``: the table's 3000, off on the board).
     rescue_residual: float | None = None
     # MuJoCo's sleeping islands: > 0 turns them on with this velocity tolerance (m/s on the

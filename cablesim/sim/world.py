@@ -700,7 +700,9 @@ class World:
 
     def _plain_step(self) -> None:
         """One step with the configured solver and the CG fallback (state saved by the caller
-        in ``_step_state``)."""
+        in ``_step_state``): a Newton step that hits the iteration limit or leaves a cable
+        vertex unsolved (:meth:`_unsolved`) is redone with CG, which goes on for
+        ``physics.fallback_time``."""
         m, d = self.model, self.data
         if self._fallback_steps > 0:
             mujoco.mj_step(m, d)
@@ -713,7 +715,7 @@ class World:
             mujoco.mj_step(m, d)
             return
         mujoco.mj_step(m, d)
-        if self.solver_iterations() < m.opt.iterations:
+        if self.solver_iterations() < m.opt.iterations and not self._unsolved():
             return
         mujoco.mj_setState(m, d, self._step_state, _STATE)
         m.opt.solver = _SOLVERS["CG"]

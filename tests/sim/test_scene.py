@@ -43,6 +43,10 @@ def _cfg(**kw) -> SceneConfig:
         (lambda: SceneConfig(camera=CameraConfig(sphere_stacks=1)), "camera.sphere_stacks"),
         (lambda: SceneConfig(physics=PhysicsConfig(fallback_time=-1.0)), "physics.fallback_time"),
         (lambda: SceneConfig(physics=PhysicsConfig(rescue_depth=-0.001)), "physics.rescue_depth"),
+        (
+            lambda: SceneConfig(physics=PhysicsConfig(rescue_residual=-1.0)),
+            "physics.rescue_residual",
+        ),
         (lambda: SceneConfig(seed=-1), "seed"),
         (lambda: SceneConfig(hoses=HoseConfig(grip_dmax=1.0)), "hoses.grip_dmax"),
     ],
