@@ -86,8 +86,7 @@ SURFACE_RESCUE_DEPTH: Mapping[str, float] = {"board": 0.0, "table": 0.003}
 #: m/s^2.  Sent straight to the dense-Newton rescue, at 300 the check fired 348 times (the dense
 #: Newton's own steps are off by 150-1400 m/s^2: 8x the CPU), at 3000 twice, but on seed 14600
 #: it fired step after step (not ended after 4.5 min of CPU, against 59 s as built); redone with
-#: CG first, both seeds
-#: held with no rescue at 49 and 46 s of CPU (53 and 59 s as built).
+#: CG first, both seeds held with no rescue at 49 and 46 s of CPU (53 and 59 s as built).
 SURFACE_RESCUE_RESIDUAL: Mapping[str, float] = {"board": 0.0, "table": 3000.0}
 
 # Sanity bounds that keep MuJoCo away from degenerate models (the table top is the box
