@@ -466,8 +466,8 @@ class World:
             if gid >= 0:
                 self._surface_geom[gid] = True
         self._last_depth = 0.0  # the deepest a hose lay in a surface after the last step
-        # a cable vertex whose equation of motion the solver left this far off (m/s^2) starts
-        # a rescue too (see _unsolved); 0: never
+        # a cable vertex whose equation of motion the solver left this far off (m/s^2) sends
+        # the step to CG, and then to a rescue (see _unsolved); 0: never
         self._rescue_residual = cfg.rescue_residual()
         self._vertex_dofs = _flex_vertex_dofs(model, [h.flex_id for h in hoses])
         self._vertex_mass = model.dof_M0[self._vertex_dofs].copy()
@@ -603,8 +603,8 @@ class World:
         Newton both stop short of the solution and the hose can run away), or with
         ``physics.rescue_depth`` > 0 leaves a hose sunk deeper than that into the table, the
         board or the mat (see :meth:`_sinking`), or with ``physics.rescue_residual`` > 0
-        leaves a cable vertex's equation of motion unsolved (see :meth:`_unsolved`), the step
-        is redone
+        leaves a cable vertex's equation of motion unsolved after CG stood in for Newton (see
+        :meth:`_unsolved`), the step is redone
         with Newton on a dense Jacobian, which converges in a few iterations there, and the
         dense Newton goes on for ``physics.rescue_time`` (16 ms per step instead of ~2), or
         until a dense step leaves every edge stretched by less than the resolved
@@ -685,11 +685,13 @@ class World:
         vertex's mass, the gradient the constraint solver drives to zero.  MuJoCo 4.0's
         sparse Newton can stop after one to three iterations with it large on a few light
         vertices (a thin-wire vertex weighs 0.2 g; perhaps because its tolerance is scaled by
-        the mean inertia of the whole model, arm included: not verified).  Traced on table thin-wire seed 14139:
-        a stretch of wire lying on the mat 16 cm from the grasp accelerated down through it at
-        about 5 m/s^2 with its contact forces rising to 1.9 N unanswered (residual up to 6.8e5
-        m/s^2), an edge beside it stretched 22 %, and the pull took the wire out of the
-        fingers; in normal steps the residual is a median 0.04 m/s^2."""
+        the mean inertia of the whole model, arm included: not verified).  Traced on table
+        thin-wire seed 14139: a stretch of wire lying on the mat 16 cm from the grasp
+        accelerated down through it at about 5 m/s^2 with its contact forces rising to 1.9 N
+        unanswered (residual up to 6.8e5 m/s^2), an edge beside it stretched 22 %, and the
+        pull took the wire out of the fingers; in normal steps the residual is a median 0.04
+        m/s^2.  Such a Newton step is redone with CG (:meth:`_plain_step`); one that CG too
+        leaves unsolved starts the dense-Newton rescue (:meth:`_advance`)."""
         if self._rescue_residual <= 0 or len(self._vertex_dofs) == 0:
             return False
         m, d = self.model, self.data
