@@ -404,17 +404,6 @@ def _damp_hoses(model: mujoco.MjModel, hoses: list[Hose]) -> None:
         damp_cable_dofs(model, js, hose.spec.cable)
 
 
-def _flex_vertex_dofs(model: mujoco.MjModel, flex_ids: list[int]) -> np.ndarray:
-    """The degrees of freedom of the vertices of the flexes ``flex_ids``, in order."""
-    dofs: list[int] = []
-    for f in flex_ids:
-        adr, num = int(model.flex_vertadr[f]), int(model.flex_vertnum[f])
-        for b in model.flex_vertbodyid[adr : adr + num]:
-            a = int(model.body_dofadr[b])
-            dofs.extend(range(a, a + int(model.body_dofnum[b])))
-    return np.asarray(dofs, dtype=int)
-
-
 class World:
     """A compiled, settled scene.  Build with ``World.build(cfg)``."""
 
@@ -469,7 +458,15 @@ class World:
         # a cable vertex whose equation of motion the solver left this far off (m/s^2) sends
         # the step to CG, and then to a rescue (see _unsolved); 0: never
         self._rescue_residual = cfg.rescue_residual()
-        self._vertex_dofs = _flex_vertex_dofs(model, [h.flex_id for h in hoses])
+        self._vertex_dofs = np.asarray(
+            [
+                a
+                for h in hoses
+                for b in h.vertex_bodies  # a pinned vertex (body 0) has none
+                for a in range(model.body_dofadr[b], model.body_dofadr[b] + model.body_dofnum[b])
+            ],
+            dtype=int,
+        )
         self._vertex_mass = model.dof_M0[self._vertex_dofs].copy()
         self._Mqacc = np.zeros(model.nv)
         self._step_state = np.empty(mujoco.mj_stateSize(model, _STATE))
@@ -615,12 +612,13 @@ class World:
         if self._rescue_steps == 0:
             rescue = self.cfg.physics.rescue_strain > 0 and len(self._edge_length0) > 0
             mujoco.mj_getState(m, d, self._step_state, _STATE)
-            self._plain_step()
+            solved = self._plain_step()
             if not rescue:
                 return None
             strain = self.hose_stretch()
             sinking = self._sinking()
-            if not (strain.max() > self.cfg.physics.rescue_strain or sinking or self._unsolved()):
+            stretched = strain.max() > self.cfg.physics.rescue_strain
+            if not (stretched or sinking or (not solved and self._unsolved())):
                 return strain
             # redo the step from the saved state, and go on, with the dense Newton
             mujoco.mj_setState(m, d, self._step_state, _STATE)
@@ -700,25 +698,26 @@ class World:
         r = self._Mqacc[i] - d.qfrc_smooth[i] - d.qfrc_constraint[i]
         return bool(np.max(np.abs(r) / self._vertex_mass) > self._rescue_residual)
 
-    def _plain_step(self) -> None:
+    def _plain_step(self) -> bool:
         """One step with the configured solver and the CG fallback (state saved by the caller
         in ``_step_state``): a Newton step that hits the iteration limit or leaves a cable
         vertex unsolved (:meth:`_unsolved`) is redone with CG, which goes on for
-        ``physics.fallback_time``."""
+        ``physics.fallback_time``.  True where the step it leaves was checked and found
+        solved (so the caller need not check it again)."""
         m, d = self.model, self.data
         if self._fallback_steps > 0:
             mujoco.mj_step(m, d)
             self._fallback_steps -= 1
             if self._fallback_steps == 0:
                 m.opt.solver = self._solver
-            return
+            return False
         fallback = self.cfg.physics.fallback_time
         if m.opt.solver != _SOLVERS["Newton"] or fallback <= 0:
             mujoco.mj_step(m, d)
-            return
+            return False
         mujoco.mj_step(m, d)
         if self.solver_iterations() < m.opt.iterations and not self._unsolved():
-            return
+            return True
         mujoco.mj_setState(m, d, self._step_state, _STATE)
         m.opt.solver = _SOLVERS["CG"]
         self._fallbacks += 1
@@ -727,6 +726,7 @@ class World:
         self._fallback_steps -= 1
         if self._fallback_steps == 0:
             m.opt.solver = self._solver
+        return False
 
     def solver_iterations(self) -> int:
         """Iterations the constraint solver took in the last step (the most of any island)."""
