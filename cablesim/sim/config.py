@@ -708,8 +708,9 @@ class PhysicsConfig(Config):
     # can report convergence in one to three iterations and leave a vertex accelerating
     # through the mat with its contact forces unbalanced) is redone with CG, which stands in
     # for ``fallback_time`` as after a Newton stall; a step CG leaves that far off starts a
-    # rescue as a stretched edge does.  0 turns it off; None: the surface's (:data:`SURFACE_RESCUE_RESIDUAL`, resolved by
-    # ``SceneConfig.rescue_residual()``: the table's 3000, off on the board).
+    # rescue as a stretched edge does.  0 turns it off; None: the surface's
+    # (:data:`SURFACE_RESCUE_RESIDUAL`, resolved by ``SceneConfig.rescue_residual()``: the
+    # table's 3000, off on the board).
     rescue_residual: float | None = None
     # MuJoCo's sleeping islands: > 0 turns them on with this velocity tolerance (m/s on the
     # hoses' vertex joints, rad/s on hinges).  An island (bodies joined by constraints:
