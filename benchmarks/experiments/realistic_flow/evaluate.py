@@ -170,6 +170,25 @@ FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {
     "dis-fine-vr10": lambda s: DISFlow(
         "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=10
     ),
+    # issue 21's cheaper DIS settings, screened on the validation scenes (noisy, arm+normal,
+    # fg-c3): fewer variational refinement iterations (5 in the medium preset) and patches
+    # every 6 px; "dis-fine-vr1" became the default ``fine`` (cablesim.perception.flow)
+    "dis-fine-vr3": lambda s: DISFlow(
+        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=3
+    ),
+    "dis-fine-vr2": lambda s: DISFlow(
+        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=2
+    ),
+    "dis-fine-vr1": lambda s: DISFlow(
+        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=1
+    ),
+    "dis-fine-vr0": lambda s: DISFlow(
+        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=0
+    ),
+    "dis-fine-s6": lambda s: DISFlow("medium", finest_scale=1, patch_size=8, patch_stride=6),
+    "dis-fine-s6vr2": lambda s: DISFlow(
+        "medium", finest_scale=1, patch_size=8, patch_stride=6, variational_refinement_iters=2
+    ),
     # the default flow on the board's (the table's mat's) crop, not scaled: issue 21's lever
     # "perception where hoses can move"
     "dis-fine-board": lambda s: RegionFlow(
