@@ -60,7 +60,7 @@ def fast_config(**changes: Any) -> HoseExploreConfig:
     interaction = InteractionConfig(
         grasp=GraspConfig(travel_speed=0.5, approach_speed=0.1),
         actions=ActionConfig(directions=("along",), periods=1, speed=0.1),
-        capture=CaptureConfig(frame_rate=10.0),
+        capture=CaptureConfig(frame_rate=10.0, truth_every=1),  # the oracle flow reads it
         retreat=RetreatConfig(speed_factor=1.0),
     )
     scene = SceneConfig(

@@ -58,8 +58,9 @@ MOVED: Mapping[str, str] = {
 
 #: Explore labels every 8th kept frame (``episode.interaction.capture.truth_every``): it reads
 #: only the target frame's labels and one ground-truth flow example (the picture), and the
-#: other frames' label passes and flows cost about 3 s of a 30 s interaction.  Its votes,
+#: other frames' label passes and flows cost about 3 s of a 20 s interaction.  Its votes,
 #: masks and metrics are those of every frame labelled: perception never reads the labels.
+#: (The interaction's own default is the same since issue 21; explore keeps its own value.)
 EXPLORE_TRUTH_EVERY = 8
 
 

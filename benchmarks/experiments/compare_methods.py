@@ -42,7 +42,9 @@ def score_seed(seed: int, perturb: bool, flow: str) -> dict:
 
 
 def _score_seed(seed: int, perturb: bool, flow: str) -> dict:
-    session = SimSession.build(EpisodeConfig.of(seed=seed, perturb=PerturbConfig(enabled=perturb)))
+    session = SimSession.build(
+        EpisodeConfig.of(seed=seed, perturb=PerturbConfig(enabled=perturb), truth_every=1)
+    )
     try:
         seg = session.pick_start()
         hose = session.hose

@@ -44,7 +44,7 @@ def recording(seed: int, root: Path) -> tuple[Path | None, str]:
     from cablesim.sim.perturb import PerturbConfig
     from cablesim.sim.session import simulate_episode
 
-    cfg = EpisodeConfig.of(seed=seed, perturb=PerturbConfig(enabled=True))
+    cfg = EpisodeConfig.of(seed=seed, perturb=PerturbConfig(enabled=True), truth_every=1)
     try:
         ep = simulate_episode(cfg, record_to=path, overwrite=True)
     except Exception as e:  # noqa: BLE001 - a failed seed is reported, not fatal

@@ -156,7 +156,9 @@ def _flow(args: argparse.Namespace, stream: Stream) -> Any:
         if lacking:
             raise InputError(
                 f"--flow oracle needs ground-truth flow, which frame {lacking[0]} (and "
-                f"{len(lacking) - 1} more) lacks: only simulated recordings have it"
+                f"{len(lacking) - 1} more) lacks: only simulated recordings have it, on every "
+                "frame where recorded with --set interaction.capture.truth_every=1 (the default "
+                "labels every 8th)"
             )
     return args.flow
 

@@ -123,6 +123,7 @@ def simulate_clip(
             "interaction.actions.directions": tuple(directions),
             "interaction.actions.amplitude": float(amplitude),
             "interaction.capture.min_gripper_step": 0.0,  # every frame: a video clip
+            "interaction.capture.truth_every": 1,  # and its exact flow
             "interaction.retreat.verify": False,  # the clip ends with the action: no target
         }
     )
@@ -264,6 +265,7 @@ def run_mcor(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
         {
             "interaction.actions.periods": int(params.get("periods", 3)),
             "interaction.capture.arm_masks": bool(params.get("arm_masks", True)),
+            "interaction.capture.truth_every": 1,  # every frame's flow and labels
         }
     )
     session = SimSession.build(cfg)

@@ -922,6 +922,7 @@ EPISODE_SHORTCUTS: Mapping[str, str] = {
     "height": "scene.camera.height",
     "robot_visual": "scene.robot.visual",
     "periods": "interaction.actions.periods",
+    "truth_every": "interaction.capture.truth_every",
 }
 
 

@@ -97,7 +97,8 @@ def _episode(params: dict[str, Any]) -> Any:
     cfg = EpisodeConfig(
         scene=scene_from(params), perturb=PerturbConfig(enabled=bool(params.get("perturb", False)))
     )
-    return cfg.with_values(periods=int(params.get("scene", {}).get("periods", 3)))
+    # every frame labelled: the oracle flow rows read each frame's ground-truth flow
+    return cfg.with_values(periods=int(params.get("scene", {}).get("periods", 3)), truth_every=1)
 
 
 def simulate_stream(params: dict[str, Any], use_cache: bool = True) -> tuple[Any, dict[str, Any]]:

@@ -96,11 +96,16 @@ def test_stream_contract(episode):
         assert steps.min() >= 0.001
         dt = np.diff([f.timestamp for f in frames])
         assert dt.min() >= period - 0.005  # triggered at 15 frames/s of simulated time
+        every = small_config().interaction.capture.truth_every  # the default: every 8th
+        assert every == 8
         for f in frames:
-            assert f.truth is not None and f.truth.grasped_hose == HOSE
-            assert f.truth.flow_to_target.shape == (*f.shape, 2)
-            assert f.truth.flow_to_target.dtype == np.float32
-            assert f.truth.flow_valid.shape == f.shape
+            if f.sample % every:  # an unlabelled frame: its images only
+                assert f.truth is None
+            else:
+                assert f.truth is not None and f.truth.grasped_hose == HOSE
+                assert f.truth.flow_to_target.shape == (*f.shape, 2)
+                assert f.truth.flow_to_target.dtype == np.float32
+                assert f.truth.flow_valid.shape == f.shape
             assert f.gripper_quat is not None and f.gripper_opening is not None
     # the gripper is in front of the camera, at the board's distance
     g = np.array([f.gripper for f in s if not f.is_target])
@@ -131,33 +136,43 @@ def test_same_seed_same_frames(episode):
         again.close()
 
 
-def test_truth_every_labels_some_frames_with_the_same_images(episode, tmp_path):
-    """``capture.truth_every`` 3: the first kept frame of each action, every third after it
-    and the target frame carry labels and ground-truth flow, equal to those of the run that
-    labels every frame; the others carry none; every image (colour and depth) is the same,
-    and the recording keeps that mix."""
-    ep, _ = episode
-    full = ep.result.stream.frames
-    cfg = small_config().with_values({"interaction.capture.truth_every": 3})
-    sparse_ep = simulate_episode(cfg, record_to=tmp_path / "rec")
+def test_default_labels_every_eighth_frame_and_old_files_rerun_as_they_ran():
+    """The interaction labels every 8th kept frame by default (issue 21); a config file
+    written before (no ``truth_every``) labelled every frame and reruns so."""
+    assert EpisodeConfig().interaction.capture.truth_every == 8
+    assert EpisodeConfig.of(truth_every=1).interaction.capture.truth_every == 1
+    doc = EpisodeConfig().to_dict()
+    del doc["interaction"]["capture"]["truth_every"]
+    assert EpisodeConfig.from_dict(doc).interaction.capture.truth_every == 1
+
+
+def test_truth_every_labels_some_frames_with_the_same_images(episode):
+    """The default ``capture.truth_every`` (8): the first kept frame of each action, every
+    eighth after it and the target frame carry labels and ground-truth flow, equal to those
+    of the run that labels every frame (``truth_every`` 1); the others carry none; every
+    image (colour and depth) is the same, and the recording keeps that mix."""
+    ep, path = episode
+    sparse = ep.result.stream.frames
+    full_ep = simulate_episode(small_config().with_values({"interaction.capture.truth_every": 1}))
     try:
-        assert sparse_ep.result.success, sparse_ep.result.reason
-        sparse = sparse_ep.result.stream.frames
+        assert full_ep.result.success, full_ep.result.reason
+        full = full_ep.result.stream.frames
+        assert all(f.truth is not None for f in full)
         assert_identical(full, sparse)
-        labelled = [f.is_target or f.sample % 3 == 0 for f in sparse]
+        labelled = [f.is_target or f.sample % 8 == 0 for f in sparse]
         assert [f.truth is not None for f in sparse] == labelled
-        assert 0 < sum(labelled) < len(sparse) / 2
+        assert 0 < sum(labelled) < len(sparse) / 4
         for fa, fb in zip(full, sparse, strict=True):
             if fb.truth is not None:
                 assert np.array_equal(fa.truth.labels, fb.truth.labels)
                 assert np.array_equal(fa.truth.flow_to_target, fb.truth.flow_to_target)
                 assert np.array_equal(fa.truth.flow_valid, fb.truth.flow_valid)
-        assert sparse_ep.result.target_robot_pixels == ep.result.target_robot_pixels
-        replayed = Recording(tmp_path / "rec").to_stream().frames
+        assert full_ep.result.target_robot_pixels == ep.result.target_robot_pixels
+        replayed = Recording(path).to_stream().frames
         assert [f.truth is not None for f in replayed] == labelled
         assert_identical(sparse, replayed)
     finally:
-        sparse_ep.close()
+        full_ep.close()
 
 
 class Interrupt(RuntimeError):

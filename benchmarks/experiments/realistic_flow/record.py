@@ -112,7 +112,10 @@ class Scene:
         )
         return EpisodeConfig(
             scene=scene,
-            interaction=InteractionConfig(actions=actions, capture=CaptureConfig(arm_masks=True)),
+            # every frame labelled: the oracle rows read each frame's ground-truth flow
+            interaction=InteractionConfig(
+                actions=actions, capture=CaptureConfig(arm_masks=True, truth_every=1)
+            ),
             perturb=PerturbConfig(enabled=True),
         )
 
