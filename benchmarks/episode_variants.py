@@ -4,14 +4,18 @@ the follow gains and the default correlation's scores against the ground truth b
 CPU time.  This is the basis for the protocol decision the 12 s target of issue 9 needs
 (``benchmarks/results/episode.md``: the default costs ~22 s on this machine).
 
-    .venv/bin/python -m benchmarks.episode_variants [--seeds 2 8] [--write]
-        [--variant NAME FIELD=VALUE ...]
+    .venv/bin/python -m benchmarks.episode_variants [--seeds 2 8] [--write] [--out FILE]
+        [--variant NAME FIELD=VALUE ...] [--json-out FILE] [--baseline FILE]
 
 Each variant is a list of ``--set`` assignments on the episode config (``cablesim explore
 --show-config`` lists the fields, without the ``episode.`` prefix here).  Every (variant,
 seed) runs once (a run is deterministic: ``bench_episode.py`` checks that), pinned to one
 core, single-threaded.  The scores are of one interaction per seed: indicative, not a
 benchmark of the method (``realistic_flow.py`` and ``cablesim benchmark thesis`` are).
+
+``--baseline FILE`` adds the rows of an earlier run's ``--json-out`` (e.g. of an older commit,
+run with ``PYTHONPATH=<old checkout>`` on the same seeds) as the variant ``before (COMMIT)``:
+a before/after table of the same seeds.
 """
 
 from __future__ import annotations
@@ -129,6 +133,10 @@ def main() -> int:
     )
     ap.add_argument("--write", action="store_true", help=f"write {OUT}")
     ap.add_argument("--json-out", type=Path, help="save the rows as JSON")
+    ap.add_argument(
+        "--baseline", type=Path, help="an earlier run's --json-out: its rows as 'before'"
+    )
+    ap.add_argument("--out", type=Path, default=OUT, help=f"the file --write writes ({OUT})")
     ap.add_argument("--no-pin", action="store_true", help="do not pin to one CPU core")
     args = ap.parse_args()
     single_thread_environment()  # before the first rendering (and the workers)
@@ -139,6 +147,13 @@ def main() -> int:
             ap.error(f"--variant {name!r}: not a built-in variant ({', '.join(VARIANTS)})")
         variants[name] = tuple(assignments) if assignments else VARIANTS[name]
     check_assignments(ap, variants, "--variant")
+    before: dict | None = None
+    if args.baseline is not None:
+        try:
+            before = json.loads(args.baseline.read_text())
+            before_rows, before_meta = before["rows"], before["meta"]
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            ap.error(f"--baseline {args.baseline}: not a --json-out of this script ({e})")
 
     core = None if args.no_pin else pin_to_one_core()
     load_start = uptime()
@@ -161,10 +176,15 @@ def main() -> int:
     meta = run_meta(pinned_core=core, load_start=load_start, load_end=uptime(), seeds=args.seeds)
     if args.json_out:
         args.json_out.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
+    if before is not None:
+        name = f"before ({before_meta['commit']})"
+        meta["baseline"] = f"{name}: {before_meta['date']}, {args.baseline.name}"
+        variants = {name: tuple(before_rows[0].get("set", ())) if before_rows else (), **variants}
+        rows = [{**r, "variant": name} for r in before_rows] + rows
     text = report(meta, rows, variants)
     print(text)
     if args.write:
-        write_results(OUT, text)
+        write_results(args.out, text)
     return 0
 
 
@@ -187,6 +207,7 @@ def report(meta: dict, rows: list[dict], variants: dict[str, tuple[str, ...]]) -
         f"- {meta['versions']}",
         f"- load (shared machine), start: `{meta['load_start']}`; end: `{meta['load_end']}`",
         f"- seeds: {', '.join(str(s) for s in meta['seeds'])}",
+        *([f"- baseline: {meta['baseline']}"] if meta.get("baseline") else []),
         "",
         "Medians over the seeds (CPU seconds):",
         "",
