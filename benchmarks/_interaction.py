@@ -2,8 +2,8 @@
 
 Shared by ``bench_episode.py`` (one core, stages) and ``bench_throughput.py`` (worker
 processes).  The stages are measured from outside the simulator, by wrapping the camera's
-snapshot and unlabelled capture (rendering: RGB + depth and, on labelled frames, label passes
-of every kept frame and the target frame)
+snapshot and unlabelled capture (rendering: RGB + depth of every kept frame and the target
+frame, and the label passes of the labelled ones)
 and ``cablesim.sim.flow_gt.flow_to_target`` (ground truth), so the same script also measures
 older commits of cablesim; physics and control is the rest of the interaction (stepping,
 IK, contact checks, settling, the runner).  Perception is

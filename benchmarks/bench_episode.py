@@ -1,7 +1,8 @@
 """One default interaction on one CPU core, wall and CPU time by stage: physics and control
-(stepping, IK, settling), rendering (RGB + depth and label passes of every kept frame and the
-target frame), ground truth (flow from the target frame to every kept frame) and the default
-CPU perception (``segment_stream(stream, method="correlation", flow="dis")``).
+(stepping, IK, settling), rendering (RGB + depth of every kept frame and the target frame, and
+the label passes of the labelled ones), ground truth (flow from the target frame to every
+labelled frame: every 8th kept frame by default since issue 21, ``capture.truth_every``) and
+the default CPU perception (``segment_stream(stream, method="correlation", flow="dis")``).
 
     .venv/bin/python -m benchmarks.bench_episode [--seed 2] [--repeats 3] [--write]
         [--json-out FILE] [--baseline FILE] [--set FIELD=VALUE ...]
@@ -45,7 +46,7 @@ OUT = RESULTS / "episode.md"
 STAGES = (
     ("physics_control", "physics + control (stepping, IK, settling)"),
     ("rendering", "rendering (RGB+depth and label passes)"),
-    ("ground_truth", "ground truth (flow target -> each kept frame)"),
+    ("ground_truth", "ground truth (flow target -> each labelled frame)"),
     ("perception", "perception (default: DIS + refine + correlation)"),
     ("total", "**total**"),
 )
@@ -131,9 +132,12 @@ def report(meta: dict, runs: list[dict], baseline: Path | None) -> str:
         "",
         "One default interaction on one CPU core: 640x480 camera, 4 hoses, one grasp, two actions "
         "(along, across) of 3 periods at +-2 cm and 5 cm/s, camera at 15 frames/s of simulated "
-        "time with the 1 mm rule, release, retreat, settle, target frame, ground-truth flow to "
-        "every kept frame, then the default CPU perception "
-        "(`segment_stream(stream, method='correlation', flow='dis')`: DIS preset fine, normal flow, arm masks and depth foreground where present; DIS medium and no refine before issue 10). "
+        "time with the 1 mm rule, release, retreat, settle, target frame, labels and "
+        "ground-truth flow on the labelled frames (every kept frame before issue 21, every 8th "
+        "since: `capture.truth_every`), then the default CPU perception "
+        "(`segment_stream(stream, method='correlation', flow='dis')`: DIS preset fine (5 "
+        "refinement iterations before issue 21, 1 since), normal flow, arm masks and depth "
+        "foreground where present; DIS medium and no refine before issue 10). "
         "`python -m benchmarks.bench_episode --write`.",
         "",
         f"- date: {meta['date']}; cablesim commit {meta['commit']}",
