@@ -25,6 +25,10 @@ import imageio.v2 as imageio
 import numpy as np
 
 ENCODERS = ("h264", "mp4v")
+#: libx264's preset: ``veryfast`` encodes the README demo's 665 frames (640x480, crf 20) in
+#: 2.0 s of ffmpeg CPU on one core against ``medium``'s 4.0 s, into a file of the same size
+#: (1.23 against 1.21 MB; ``ultrafast`` 1.1 s but 4.9 MB); issue 21
+PRESET = "veryfast"
 FOURCC = {"h264": "avc1", "mp4v": "mp4v"}
 _CONTAINERS = {b"moov", b"trak", b"mdia", b"minf", b"stbl"}
 
@@ -146,7 +150,7 @@ def _open_h264(path: Path, size: tuple[int, int], fps: float, crf: int) -> Any:
             quality=None,
             macro_block_size=2,
             ffmpeg_log_level="error",
-            output_params=["-crf", str(crf), "-preset", "medium", "-movflags", "+faststart"],
+            output_params=["-crf", str(crf), "-preset", PRESET, "-movflags", "+faststart"],
         )
         sink.send(None)  # starts ffmpeg
     except (OSError, RuntimeError):

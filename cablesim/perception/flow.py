@@ -42,7 +42,7 @@ DIS_PRESETS = {
 #: are 12 px every 8 px): patches of 16 full-resolution pixels instead of 24, so a 6-7 px
 #: hose drags its motion less far onto the board beside it (``benchmarks/experiments/
 #: realistic_flow/``).  Since issue 21 the variational refinement runs 1 iteration per level
-#: (the preset's 5): 13 ms instead of 19 per 640x480 pair on one core, with the default
+#: (the preset's 5): 12 ms instead of 18 per 640x480 pair on one core, with the default
 #: perception's validation F_0.4 0.853 against 0.855 (``results/realistic_flow_dis_speed.md``).
 DIS_FINE = {
     "finest_scale": 1,
