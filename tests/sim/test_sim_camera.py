@@ -169,6 +169,33 @@ def test_robot_pixels_labelled_robot():
     assert np.array_equal(robot, np.isin(snap.body, cam.robot_bodies))
 
 
+def test_label_lookup_on_the_red_byte_is_the_three_byte_sum(monkeypatch):
+    """The label pass looks ids up on the red byte alone where every id fits it; forced onto
+    the three-byte sum (as a scene of 255 or more geoms takes it), the same labels, body ids
+    and depth, bit for bit, with the arm and the hoses in view."""
+    import cv2
+    import mujoco
+
+    from cablesim.panda.model import HOME_QPOS, joint_qpos_addresses
+
+    world = World.build(
+        SceneConfig(seed=1, camera=CameraConfig(width=W, height=H), robot=RobotConfig())
+    )
+    world.data.qpos[joint_qpos_addresses(world.model, world.panda.joints)] = HOME_QPOS
+    mujoco.mj_forward(world.model, world.data)
+    with SimCamera(world, layered=False) as cam:
+        cam._update_scene()  # noqa: SLF001
+        fast = cam._segmentation_pass()  # noqa: SLF001
+        assert cam._ctx().scene.ngeom < 255  # noqa: SLF001  (the red byte holds every id)
+        with monkeypatch.context() as mp:  # "green or blue seen": the three-byte sum
+            mp.setattr(cv2, "countNonZero", lambda _: 1)
+            summed = cam._segmentation_pass()  # noqa: SLF001
+    for a, b in zip(fast, summed, strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    labels = fast[0]
+    assert (labels == LABEL_ROBOT).sum() > 500 and {0, 1, 2, 3} <= set(np.unique(labels).tolist())
+
+
 def test_mesh_look_labels_what_is_drawn():
     """``robot.visual="mesh"``: the labels come from the drawn meshes (the segmentation pass
     sees the very surfaces of the colour pass, so its depth equals the image's depth), not from
