@@ -4,7 +4,9 @@ hose), release, retreat out of view, settle, target frame.
 
 Files in --out:
   recording/         the frame stream (see cablesim.recording; replay with
-                     cablesim.camera.replay.ReplayCamera)
+                     cablesim.camera.replay.ReplayCamera); labels and ground-truth flow on
+                     every 8th kept frame and the target (every frame with
+                     --set interaction.capture.truth_every=1, e.g. to score flows later)
   contact_sheet.png  start image with the segment, a few action frames, the target frame and
                      its ground-truth grasped-hose mask (titled tiles)
   start.png, target.png  the camera's images
