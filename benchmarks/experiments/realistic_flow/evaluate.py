@@ -159,36 +159,29 @@ def board_crop(scene: Scene, K: Intrinsics, margin: int = 8) -> tuple[int, int, 
     return board_region(scene.config().scene, K, margin)
 
 
+def _fine(**overrides: int) -> DISFlow:
+    """DIS ``fine`` as these results name it (before issue 21's default): OpenCV's medium
+    preset with 8 px patches every 4 px at half resolution and the preset's 5 variational
+    refinement iterations; ``overrides`` change settings of :class:`DISFlow`."""
+    return DISFlow("medium", **{"finest_scale": 1, "patch_size": 8, "patch_stride": 4, **overrides})
+
+
 FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {
     "oracle": lambda s: RecordedOracle(s),
     "dis-medium": lambda s: DISFlow("medium"),
     "dis-fast": lambda s: DISFlow("fast"),
-    "dis-fine": lambda s: DISFlow("medium", finest_scale=1, patch_size=8, patch_stride=4),
-    "dis-fine-gd12": lambda s: DISFlow(
-        "medium", finest_scale=1, patch_size=8, patch_stride=4, gradient_descent_iters=12
-    ),
-    "dis-fine-vr10": lambda s: DISFlow(
-        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=10
-    ),
+    "dis-fine": lambda s: _fine(),
+    "dis-fine-gd12": lambda s: _fine(gradient_descent_iters=12),
+    "dis-fine-vr10": lambda s: _fine(variational_refinement_iters=10),
     # issue 21's cheaper DIS settings, screened on the validation scenes (noisy, arm+normal,
     # fg-c3): fewer variational refinement iterations (5 in the medium preset) and patches
     # every 6 px; "dis-fine-vr1" became the default ``fine`` (cablesim.perception.flow)
-    "dis-fine-vr3": lambda s: DISFlow(
-        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=3
-    ),
-    "dis-fine-vr2": lambda s: DISFlow(
-        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=2
-    ),
-    "dis-fine-vr1": lambda s: DISFlow(
-        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=1
-    ),
-    "dis-fine-vr0": lambda s: DISFlow(
-        "medium", finest_scale=1, patch_size=8, patch_stride=4, variational_refinement_iters=0
-    ),
-    "dis-fine-s6": lambda s: DISFlow("medium", finest_scale=1, patch_size=8, patch_stride=6),
-    "dis-fine-s6vr2": lambda s: DISFlow(
-        "medium", finest_scale=1, patch_size=8, patch_stride=6, variational_refinement_iters=2
-    ),
+    "dis-fine-vr3": lambda s: _fine(variational_refinement_iters=3),
+    "dis-fine-vr2": lambda s: _fine(variational_refinement_iters=2),
+    "dis-fine-vr1": lambda s: _fine(variational_refinement_iters=1),
+    "dis-fine-vr0": lambda s: _fine(variational_refinement_iters=0),
+    "dis-fine-s6": lambda s: _fine(patch_stride=6),
+    "dis-fine-s6vr2": lambda s: _fine(patch_stride=6, variational_refinement_iters=2),
     # the default flow on the board's (the table's mat's) crop, not scaled: issue 21's lever
     # "perception where hoses can move"
     "dis-fine-board": lambda s: RegionFlow(
