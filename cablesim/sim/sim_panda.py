@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
@@ -240,7 +240,8 @@ class SimPanda(ArmModelChecks, Robot):
         dist, angle = self.ee_pose().distance_to(pose)
         duration = max(1.875 * dist / speed, 1.875 * angle / angular_speed, 0.02)
         self.last_plan = plan
-        return self._execute(np.asarray(plan), duration, pose)
+        with self._transit():
+            return self._execute(np.asarray(plan), duration, pose)
 
     def move_joints(self, q: np.ndarray, speed_factor: float = 0.3) -> MoveResult:
         q = np.asarray(q, dtype=float).reshape(7)
@@ -256,7 +257,15 @@ class SimPanda(ArmModelChecks, Robot):
         duration = max(
             1.875 * float(np.max(np.abs(q - q0) / (JOINT_VELOCITY_LIMITS * speed_factor))), 0.02
         )
-        return self._execute(np.asarray(plan), duration, self.arm.fk(q))
+        with self._transit():
+            return self._execute(np.asarray(plan), duration, self.arm.fk(q))
+
+    def _transit(self) -> AbstractContextManager[None]:
+        """A motion with an open hand lets the hoses it does not touch rest (the world's
+        ``transit``: ``physics.transit_sleep``); with the hand closed on a hose, or on a world
+        without it, everything stays awake."""
+        transit = getattr(self.world, "transit", None)
+        return nullcontext() if self._closed or transit is None else transit()
 
     def _execute(self, plan: np.ndarray, duration: float, target: Pose) -> MoveResult:
         cfg, w = self.config, self.world

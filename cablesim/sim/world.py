@@ -753,6 +753,29 @@ class World:
         return self._fallbacks
 
     @contextmanager
+    def transit(self) -> Iterator[None]:
+        """Steps inside the block run with MuJoCo's sleeping islands on, with
+        ``physics.transit_sleep`` as the tolerance (``SimPanda`` moving with an open hand): a
+        hose whose every vertex stays slower than that for 10 steps rests there and costs no
+        collision or constraint solving; the hand, an awake hose or an applied force touching
+        it wakes its island (the hose and what touches it).  Leaving the block turns sleep off
+        again, and MuJoCo wakes every tree at the next step, each with the velocity it slept
+        with (zero).  Nothing changes where ``transit_sleep`` is 0 or sleep is on throughout
+        (``physics.sleep_tolerance`` > 0)."""
+        m = self.model
+        flag = int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+        tolerance = self.cfg.physics.transit_sleep
+        if tolerance <= 0 or m.opt.enableflags & flag:
+            yield
+            return
+        m.opt.sleep_tolerance = tolerance
+        m.opt.enableflags |= flag
+        try:
+            yield
+        finally:
+            m.opt.enableflags &= ~flag
+
+    @contextmanager
     def hooks(
         self, before: Sequence[StepHook] = (), after: Sequence[StepHook] = ()
     ) -> Iterator[World]:
