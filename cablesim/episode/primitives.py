@@ -368,7 +368,8 @@ def _back_out(robot: Robot, cfg: GraspConfig, g: Pose | None) -> PrimitiveResult
     if g is None:
         return PrimitiveResult(False, "back out: no grasp pose", outcome=Outcome.GRASP_NOT_HELD)
     pre = g.translated(-cfg.pregrasp_offset * g.rotation[:, 2])
-    r = robot.move_to(pre, speed=cfg.approach_speed)
+    with robot.transit():
+        r = robot.move_to(pre, speed=cfg.approach_speed)
     # stopping a few mm short of the pre-grasp (a hose brushing the open hand) still leaves
     # the hand clear of the hose for the next attempt, which starts with a move to its own
     # pre-grasp; a refused or colliding motion does not
@@ -410,12 +411,15 @@ def _grasp_once(
             Outcome.RELEASE_FAILED,
             moved=from_pregrasp,
         )
-    r = robot.move_to(pre, speed=cfg.approach_speed) if from_pregrasp else MoveResult(False)
-    if not r:
-        r = _to_pose_via_retract(robot, pre, standoff=cfg.standoff, travel_speed=cfg.travel_speed)
-    if not r:
-        return PrimitiveResult.fail("move to pre-grasp", r, Outcome.UNREACHABLE, moved=True)
-    r = robot.move_to(g, speed=cfg.approach_speed)
+    with robot.transit():  # the open hand to the hose: what it does not touch may rest
+        r = robot.move_to(pre, speed=cfg.approach_speed) if from_pregrasp else MoveResult(False)
+        if not r:
+            r = _to_pose_via_retract(
+                robot, pre, standoff=cfg.standoff, travel_speed=cfg.travel_speed
+            )
+        if not r:
+            return PrimitiveResult.fail("move to pre-grasp", r, Outcome.UNREACHABLE, moved=True)
+        r = robot.move_to(g, speed=cfg.approach_speed)
     if not r:
         return PrimitiveResult.fail(
             "approach", r, Outcome.GRASP_NOT_HELD, moved=True, retriable=True, pose=g
@@ -584,15 +588,16 @@ def _approach_for_push(
     app = g.rotation[:, 2]
     g = g.translated(-standoff * app)
     robot.open(0.0)
-    r = _to_pose_via_retract(
-        robot,
-        g.translated(-cfg.pregrasp_offset * app),
-        standoff=cfg.standoff,
-        travel_speed=cfg.travel_speed,
-    )
-    if not r:
-        return PrimitiveResult.fail("move to pre-push", r, Outcome.UNREACHABLE)
-    r = robot.move_to(g, speed=cfg.approach_speed)
+    with robot.transit():  # the closed, empty hand to the hose: the strokes run awake
+        r = _to_pose_via_retract(
+            robot,
+            g.translated(-cfg.pregrasp_offset * app),
+            standoff=cfg.standoff,
+            travel_speed=cfg.travel_speed,
+        )
+        if not r:
+            return PrimitiveResult.fail("move to pre-push", r, Outcome.UNREACHABLE)
+        r = robot.move_to(g, speed=cfg.approach_speed)
     if not r:
         return PrimitiveResult.fail("push approach", r, Outcome.UNREACHABLE)
     return PrimitiveResult(True, pose=g)
@@ -616,8 +621,18 @@ def retreat(
     travel_speed: float = 0.25,
 ) -> PrimitiveResult:
     """Back off along -approach (if possible), then joint motion through the retract
-    configuration to ``qpos`` (out of the camera's view)."""
-    cfg = cfg or RetreatConfig()
+    configuration to ``qpos`` (out of the camera's view); a transit (:meth:`Robot.transit`)."""
+    with robot.transit():
+        return _retreat(robot, qpos, cfg or RetreatConfig(), approach, travel_speed)
+
+
+def _retreat(
+    robot: Robot,
+    qpos: Sequence[float],
+    cfg: RetreatConfig,
+    approach: Sequence[float],
+    travel_speed: float,
+) -> PrimitiveResult:
     notes = []
     if cfg.back_off > 0:
         r = robot.move_relative(-cfg.back_off * _unit(approach), speed=travel_speed)

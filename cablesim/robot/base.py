@@ -13,6 +13,7 @@ with relative dynamics, ``grasp`` -> ``Gripper.grasp(width, speed, force)``, ``o
 from __future__ import annotations
 
 import abc
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass
 from typing import Literal
 
@@ -133,6 +134,13 @@ class Robot(abc.ABC):
 
     def stop(self) -> None:  # noqa: B027 - optional hook: simulated motions block
         """Stop any motion now (Ctrl-C on the real robot); the robot stays usable."""
+
+    def transit(self) -> AbstractContextManager[None]:
+        """The motions inside bring the hand to a hose or away from it, holding nothing (the
+        approach to a grasp or push and the retreat; not the actions).  A simulated robot lets
+        the hoses it does not touch rest meanwhile (``physics.transit_sleep``); a real robot
+        runs them as any other motion."""
+        return nullcontext()
 
     # ---- frames ------------------------------------------------------------------------------
     def world_to_camera(self, pose: Pose) -> Pose:

@@ -14,6 +14,7 @@ the same around the simulated and the real arm.
 from __future__ import annotations
 
 import math
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 from typing import Any
 
@@ -152,3 +153,6 @@ class GuardedRobot(Robot):
 
     def stop(self) -> None:
         self.robot.stop()
+
+    def transit(self) -> AbstractContextManager[None]:
+        return self.robot.transit()

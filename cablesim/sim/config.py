@@ -719,15 +719,16 @@ class PhysicsConfig(Config):
     # no collision or constraint solving until something awake touches it, or a force is
     # applied to it (the neighbour perturbation).  0 (the default) keeps everything awake.
     sleep_tolerance: float = 0.0
-    # > 0: the same sleeping islands, with this tolerance, only while the simulated arm moves
-    # with an open hand (``SimPanda``'s motions to a grasp or push and away from it, through
-    # :meth:`~cablesim.sim.world.World.transit`): the hoses the hand does not touch rest
-    # there and cost no collision or constraint solving; the hand, or a hose it moves,
-    # touching one wakes it, and every hose wakes at the first step after the motion (a
-    # closed hand, the actions and the waits run with everything awake).  Issue 21: about 2
-    # s of CPU less per default interaction.  0 keeps everything awake throughout; a file
-    # written before the field existed reruns with 0 (``_migrate``).  Ignored while
-    # ``sleep_tolerance`` > 0 (sleep on throughout).
+    # > 0: the same sleeping islands, with this tolerance, only while the simulated arm is in
+    # transit holding nothing (``Robot.transit``: the approach to a grasp or push and the
+    # retreat; :meth:`~cablesim.sim.world.World.transit`): the hoses the hand does not touch
+    # rest there and cost no collision or constraint solving; the hand, a hose it moves or a
+    # force touching one wakes it, and every hose wakes at the first step after each motion
+    # (the grasp, the hold check, the actions and the waits run with everything awake).
+    # Issue 21: about 1.7 s of CPU less per default interaction.  0 keeps everything awake
+    # throughout; a file written before the field existed reruns with 0 (``_migrate``).
+    # Ignored while ``sleep_tolerance`` > 0 (sleep on throughout).  The settle does not move
+    # the arm: the settled state and its cache key do not depend on it.
     transit_sleep: float = 1e-3
     # MuJoCo's impratio for the elliptic friction cones; None: the surface's
     # (:data:`SURFACE_IMPRATIO`; ``SceneConfig.impratio()`` resolves it)

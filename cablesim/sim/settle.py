@@ -99,6 +99,7 @@ def cache_key_description(world: World) -> dict[str, Any]:
     cfg.pop("camera")  # the camera does not touch the physics
     cfg["robot"].pop("visual")  # nor does the arm's look (visual-only geoms, same physics)
     cfg["physics"].pop("cache")
+    cfg["physics"].pop("transit_sleep")  # the settle does not move the arm
     return {
         "cfg": cfg,
         "mujoco": mujoco.__version__,

@@ -163,6 +163,7 @@ class SimPanda(ArmModelChecks, Robot):
             base_pos, base_quat, obstacles, hose_capsules=capsules, hose_radius=radii
         )
         self._closed = False  # the fingers were closed (grasp) and not opened since
+        self._transits = 0  # open transit() blocks
         self._grip_kp = float(m.actuator_gainprm[self._gripper, 0])
         self._grip_kv = -float(m.actuator_biasprm[self._gripper, 2])
         self._grip_command = float(d.ctrl[self._gripper])  # what the gripper was told
@@ -240,7 +241,7 @@ class SimPanda(ArmModelChecks, Robot):
         dist, angle = self.ee_pose().distance_to(pose)
         duration = max(1.875 * dist / speed, 1.875 * angle / angular_speed, 0.02)
         self.last_plan = plan
-        with self._transit():
+        with self._resting():
             return self._execute(np.asarray(plan), duration, pose)
 
     def move_joints(self, q: np.ndarray, speed_factor: float = 0.3) -> MoveResult:
@@ -257,15 +258,28 @@ class SimPanda(ArmModelChecks, Robot):
         duration = max(
             1.875 * float(np.max(np.abs(q - q0) / (JOINT_VELOCITY_LIMITS * speed_factor))), 0.02
         )
-        with self._transit():
+        with self._resting():
             return self._execute(np.asarray(plan), duration, self.arm.fk(q))
 
-    def _transit(self) -> AbstractContextManager[None]:
-        """A motion with an open hand lets the hoses it does not touch rest (the world's
-        ``transit``: ``physics.transit_sleep``); with the hand closed on a hose, or on a world
-        without it, everything stays awake."""
+    @contextmanager
+    def transit(self) -> Iterator[None]:
+        """See :meth:`Robot.transit`: each motion inside runs in the world's
+        :meth:`~cablesim.sim.world.World.transit` (the hoses it does not touch rest,
+        ``physics.transit_sleep``) unless the hand is closed on something (after
+        :meth:`grasp`, until :meth:`open`)."""
+        self._transits += 1
+        try:
+            yield
+        finally:
+            self._transits -= 1
+
+    def _resting(self) -> AbstractContextManager[None]:
+        """The world's transit for a motion inside :meth:`transit` with nothing grasped;
+        everything awake otherwise (and on a world without ``transit``)."""
         transit = getattr(self.world, "transit", None)
-        return nullcontext() if self._closed or transit is None else transit()
+        if self._transits == 0 or self._closed or transit is None:
+            return nullcontext()
+        return transit()
 
     def _execute(self, plan: np.ndarray, duration: float, target: Pose) -> MoveResult:
         cfg, w = self.config, self.world

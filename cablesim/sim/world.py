@@ -755,7 +755,8 @@ class World:
     @contextmanager
     def transit(self) -> Iterator[None]:
         """Steps inside the block run with MuJoCo's sleeping islands on, with
-        ``physics.transit_sleep`` as the tolerance (``SimPanda`` moving with an open hand): a
+        ``physics.transit_sleep`` as the tolerance (``SimPanda``'s motions in a
+        :meth:`~cablesim.robot.base.Robot.transit`, holding nothing): a
         hose whose every vertex stays slower than that for 10 steps rests there and costs no
         collision or constraint solving; the hand, an awake hose or an applied force touching
         it wakes its island (the hose and what touches it).  Leaving the block turns sleep off

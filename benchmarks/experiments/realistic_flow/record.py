@@ -35,8 +35,11 @@ TAG = "rf2"
 #: 1280x720) and "fast" (320x240 and 2 periods per action: the setting that brings one
 #: interaction near issue 9's 12 s here, benchmarks/results/episode_variants.md) and "sleep"
 #: (the default with MuJoCo's sleeping islands on, ``physics.sleep_tolerance`` 1e-3: issue 21's
-#: lever, scored against the default on the same protocol)
-GEOMETRIES = ("default", "thesis", "fast", "sleep")
+#: lever, scored against the default on the same protocol) and "awake" (the default with every
+#: hose awake while the arm moves with an open hand, ``physics.transit_sleep`` 0: the default
+#: before issue 21's transit sleep; the recordings named "default" before it were renamed
+#: "awake", since they are these)
+GEOMETRIES = ("default", "thesis", "fast", "sleep", "awake")
 #: ``physics.sleep_tolerance`` of the "sleep" setting (benchmarks/results/sleep_islands.md)
 SLEEP_TOLERANCE = 1e-3
 #: what the cables are and what holds them (issue 22): a scene of the default hose on the board
@@ -107,6 +110,8 @@ class Scene:
             looks["table.background"] = self.board
         if self.geometry == "sleep":
             looks["physics.sleep_tolerance"] = SLEEP_TOLERANCE
+        elif self.geometry == "awake":
+            looks["physics.transit_sleep"] = 0.0
         scene = SceneConfig(seed=self.seed, camera=camera).with_values(
             {"surface": self.surface, "hoses.kind": self.cable, **looks}
         )
