@@ -663,6 +663,14 @@ class PhysicsConfig(Config):
     timestep: float = 0.004
     solver: str = "Newton"  # one of SOLVERS
     fallback_time: float = 1.0  # s of CG after a Newton step that did not converge
+    # the same once the scene has settled (every step outside ``settle_world``: the
+    # interaction's); None: ``fallback_time``.  In the actions a grasped, taut hose stalls
+    # Newton again and again: 0.25 s of CG instead of 1 s lets Newton, a few times cheaper per
+    # step where it converges, back sooner (issue 21: about 1 s of CPU less per default
+    # interaction; 0.1 s stalls it more often and saves no more).  The settle keeps
+    # ``fallback_time``: the settled states and their cache keys do not depend on this.  A
+    # file written before the field existed reruns with None (``_migrate``).
+    run_fallback_time: float | None = 0.25
     settle_speed: float = 0.001  # m/s: settled when every hose vertex is slower than this
     settle_max_time: float = 20.0  # simulated seconds before giving up
     settle_check_every: float = 0.1
@@ -737,8 +745,11 @@ class PhysicsConfig(Config):
     @classmethod
     def _migrate(cls, data: dict[str, Any], path: str) -> dict[str, Any]:
         """A file without ``transit_sleep`` was written while every hose stayed awake through
-        the arm's motions (before issue 21's transit sleep): it reruns as it ran, with 0."""
+        the arm's motions (before issue 21's transit sleep): it reruns as it ran, with 0; one
+        without ``run_fallback_time`` while every step fell back to CG for
+        ``fallback_time``: it reruns with None."""
         data.setdefault("transit_sleep", 0.0)
+        data.setdefault("run_fallback_time", None)
         return data
 
     def _validate(self) -> None:
@@ -747,6 +758,9 @@ class PhysicsConfig(Config):
         if self.solver not in SOLVERS:
             raise ConfigError("physics.solver", f"must be one of {SOLVERS}, got {self.solver!r}")
         check_positive("physics.fallback_time", self.fallback_time, allow_zero=True)
+        if self.run_fallback_time is not None:
+            check_positive("physics.run_fallback_time", self.run_fallback_time, allow_zero=True)
+            check_number("physics.run_fallback_time", self.run_fallback_time, hi=60.0)
         check_positive("physics.settle_speed", self.settle_speed)
         check_positive("physics.settle_max_time", self.settle_max_time)
         check_positive("physics.settle_check_every", self.settle_check_every)

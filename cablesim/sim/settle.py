@@ -100,6 +100,7 @@ def cache_key_description(world: World) -> dict[str, Any]:
     cfg["robot"].pop("visual")  # nor does the arm's look (visual-only geoms, same physics)
     cfg["physics"].pop("cache")
     cfg["physics"].pop("transit_sleep")  # the settle does not move the arm
+    cfg["physics"].pop("run_fallback_time")  # nor step outside the settle
     return {
         "cfg": cfg,
         "mujoco": mujoco.__version__,
@@ -264,18 +265,19 @@ def settle_world(world: World, progress: bool = False) -> float:
     chunk = max(1, int(round(p.settle_check_every / world.model.opt.timestep)))
     speed = float("inf")
     calm = 0  # consecutive checks below the threshold (one could be a passing minimum)
-    while world.time < p.settle_max_time:
-        world.step(chunk)
-        speed = max_vertex_speed(world)
-        if progress:
-            print(
-                f"\r[settle] t={world.time:5.2f}s  max hose speed {speed * 1000:8.3f} mm/s",
-                end="",
-                flush=True,
-            )
-        calm = calm + 1 if speed < p.settle_speed else 0
-        if calm >= 3:
-            break
+    with world.settling():
+        while world.time < p.settle_max_time:
+            world.step(chunk)
+            speed = max_vertex_speed(world)
+            if progress:
+                print(
+                    f"\r[settle] t={world.time:5.2f}s  max hose speed {speed * 1000:8.3f} mm/s",
+                    end="",
+                    flush=True,
+                )
+            calm = calm + 1 if speed < p.settle_speed else 0
+            if calm >= 3:
+                break
     if progress:
         print()
     settled = speed < p.settle_speed

@@ -440,6 +440,7 @@ class World:
         # Newton with CG standing in where Newton stalls (see PhysicsConfig and _advance)
         self._solver = int(model.opt.solver)
         self._fallback_steps = 0
+        self._settling = False  # inside settling(): see fallback_time
         self._fallbacks = 0  # how often CG stood in since the last reset
         # accurate steps (Newton, dense Jacobian) while a hose is stretched (see _advance)
         self._jacobian = int(model.opt.jacobian)
@@ -592,7 +593,7 @@ class World:
         None).  With ``physics.solver`` Newton: if Newton stops converging (it
         hits its iteration limit, which MuJoCo 4.0's Newton does in some hose-on-hose contact
         states and then leaves the hoses jittering), the step is redone from the same state
-        with CG, and CG keeps stepping for ``physics.fallback_time`` before Newton resumes.
+        with CG, and CG keeps stepping for :attr:`fallback_time` before Newton resumes.
         Both solve the same convex problem; this only picks the one that converges.
 
         With ``physics.rescue_strain`` > 0: when a step leaves a hose edge stretched by more
@@ -702,7 +703,7 @@ class World:
         """One step with the configured solver and the CG fallback (state saved by the caller
         in ``_step_state``): a Newton step that hits the iteration limit or leaves a cable
         vertex unsolved (:meth:`_unsolved`) is redone with CG, which goes on for
-        ``physics.fallback_time``.  True where the step it leaves was checked and found
+        :attr:`fallback_time`.  True where the step it leaves was checked and found
         solved (so the caller need not check it again)."""
         m, d = self.model, self.data
         if self._fallback_steps > 0:
@@ -711,7 +712,7 @@ class World:
             if self._fallback_steps == 0:
                 m.opt.solver = self._solver
             return False
-        fallback = self.cfg.physics.fallback_time
+        fallback = self.fallback_time
         if m.opt.solver != _SOLVERS["Newton"] or fallback <= 0:
             mujoco.mj_step(m, d)
             return False
@@ -751,6 +752,25 @@ class World:
         """How often CG stood in for a Newton step that did not converge since the last reset
         (see ``_advance``)."""
         return self._fallbacks
+
+    @property
+    def fallback_time(self) -> float:
+        """How long (simulated s) CG stands in after a Newton step that did not converge:
+        ``physics.fallback_time`` while the scene settles (:meth:`settling`),
+        ``physics.run_fallback_time`` (where set) in every other step."""
+        p = self.cfg.physics
+        if self._settling or p.run_fallback_time is None:
+            return p.fallback_time
+        return p.run_fallback_time
+
+    @contextmanager
+    def settling(self) -> Iterator[None]:
+        """The steps inside settle the scene (``settle_world``): see :attr:`fallback_time`."""
+        self._settling = True
+        try:
+            yield
+        finally:
+            self._settling = False
 
     @contextmanager
     def transit(self) -> Iterator[None]:

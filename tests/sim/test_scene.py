@@ -42,6 +42,10 @@ def _cfg(**kw) -> SceneConfig:
         (lambda: SceneConfig(physics=PhysicsConfig(solver="PGS")), "physics.solver"),
         (lambda: SceneConfig(camera=CameraConfig(sphere_stacks=1)), "camera.sphere_stacks"),
         (lambda: SceneConfig(physics=PhysicsConfig(fallback_time=-1.0)), "physics.fallback_time"),
+        (
+            lambda: SceneConfig(physics=PhysicsConfig(run_fallback_time=-1.0)),
+            "physics.run_fallback_time",
+        ),
         (lambda: SceneConfig(physics=PhysicsConfig(rescue_depth=-0.001)), "physics.rescue_depth"),
         (
             lambda: SceneConfig(physics=PhysicsConfig(rescue_residual=-1.0)),
@@ -195,6 +199,46 @@ def test_diverged_physics_raises_a_named_error(settled) -> None:
     world.step(1)  # usable again after reset
 
 
+def test_the_settle_and_the_run_fall_back_to_cg_for_their_own_times(settled) -> None:
+    """CG stands in for ``physics.fallback_time`` (1 s) while a scene settles and for
+    ``physics.run_fallback_time`` (0.25 s) in every step after; a file without the latter
+    (written before it existed) reruns with 1 s throughout."""
+    import contextlib
+
+    import mujoco
+
+    from cablesim.config import from_dict, to_dict
+
+    world = settled
+    m = world.model
+    newton, cg = int(mujoco.mjtSolver.mjSOL_NEWTON), int(mujoco.mjtSolver.mjSOL_CG)
+    p = world.cfg.physics
+    assert (p.fallback_time, p.run_fallback_time) == (1.0, 0.25)
+    iterations = m.opt.iterations
+    for settling, seconds in ((True, 1.0), (False, 0.25)):
+        world.reset()
+        with world.settling() if settling else contextlib.nullcontext():
+            assert world.fallback_time == seconds
+            m.opt.iterations = 1  # every Newton step ends at the limit: CG stands in
+            try:
+                world.step(1)
+            finally:
+                m.opt.iterations = iterations
+        assert world.solver_fallbacks == 1
+        world.step(round(seconds / m.opt.timestep) - 2)
+        assert m.opt.solver == cg, f"CG should stand in for {seconds} s"
+        world.step(1)
+        assert m.opt.solver == newton, f"Newton should resume after {seconds} s"
+    world.reset()
+    old = to_dict(PhysicsConfig())
+    del old["run_fallback_time"]
+    assert from_dict(PhysicsConfig, old).run_fallback_time is None
+    from cablesim.sim.world import World
+
+    before = World.build(world.cfg.replace(physics=PhysicsConfig(run_fallback_time=None)), False)
+    assert before.fallback_time == 1.0
+
+
 def test_cg_stands_in_where_newton_does_not_converge(settled) -> None:
     """A Newton step that hits the iteration limit is redone from the same state with CG (the
     committed step is CG's), CG goes on for fallback_time, then Newton resumes; reset restores
@@ -230,7 +274,7 @@ def test_cg_stands_in_where_newton_does_not_converge(settled) -> None:
         m.opt.iterations = iterations
     world.set_state(after_one)
     m.opt.solver = cg
-    world.step(round(world.cfg.physics.fallback_time / m.opt.timestep) - 1)
+    world.step(round(world.fallback_time / m.opt.timestep) - 1)
     assert m.opt.solver == newton  # Newton resumes after fallback_time
     assert world.solver_fallbacks == 1
     end = world.get_state()
