@@ -35,11 +35,12 @@ TAG = "rf2"
 #: 1280x720) and "fast" (320x240 and 2 periods per action: the setting that brings one
 #: interaction near issue 9's 12 s here, benchmarks/results/episode_variants.md) and "sleep"
 #: (the default with MuJoCo's sleeping islands on, ``physics.sleep_tolerance`` 1e-3: issue 21's
-#: lever, scored against the default on the same protocol) and "awake" (the default with every
-#: hose awake while the arm moves with an open hand, ``physics.transit_sleep`` 0: the default
-#: before issue 21's transit sleep; the recordings named "default" before it were renamed
-#: "awake", since they are these)
-GEOMETRIES = ("default", "thesis", "fast", "sleep", "awake")
+#: lever, scored against the default on the same protocol) and "before21" (the default's
+#: physics before issue 21's two physics changes: every hose awake while the arm is in transit,
+#: ``physics.transit_sleep`` 0, and CG standing in for 1 s after each Newton stall in every
+#: step, ``physics.run_fallback_time`` None; the recordings named "default" before them were
+#: renamed "before21", since they are these)
+GEOMETRIES = ("default", "thesis", "fast", "sleep", "before21")
 #: ``physics.sleep_tolerance`` of the "sleep" setting (benchmarks/results/sleep_islands.md)
 SLEEP_TOLERANCE = 1e-3
 #: what the cables are and what holds them (issue 22): a scene of the default hose on the board
@@ -110,8 +111,9 @@ class Scene:
             looks["table.background"] = self.board
         if self.geometry == "sleep":
             looks["physics.sleep_tolerance"] = SLEEP_TOLERANCE
-        elif self.geometry == "awake":
+        elif self.geometry == "before21":
             looks["physics.transit_sleep"] = 0.0
+            looks["physics.run_fallback_time"] = None
         scene = SceneConfig(seed=self.seed, camera=camera).with_values(
             {"surface": self.surface, "hoses.kind": self.cable, **looks}
         )

@@ -38,14 +38,14 @@ ROWS = ("before", "previous", "after", "after+colour", "learned", "oracle")
 
 #: what each recorded setting (``record.GEOMETRIES``) is
 GEOMETRY_TEXT = {
-    "default": "4 hoses, 640x480, K_p = 3, the hoses resting while the arm moves with an open "
-    "hand (`physics.transit_sleep` 1e-3)",
+    "default": "4 hoses, 640x480, K_p = 3",
     "thesis": "4 hoses, the D456 at 1280x720, flow on the task-board region scaled 1.5x, K_p = 3",
     "fast": "4 hoses, 320x240, K_p = 2: the `fast` setting",
     "sleep": "4 hoses, 640x480, K_p = 3, MuJoCo's sleeping islands on "
     "(`physics.sleep_tolerance` 1e-3): the `sleep` setting",
-    "awake": "4 hoses, 640x480, K_p = 3, every hose awake while the arm moves with an open hand "
-    "(`physics.transit_sleep` 0, the default before issue 21's transit sleep): the `awake` setting",
+    "before21": "4 hoses, 640x480, K_p = 3, the physics before issue 21's changes (every hose "
+    "awake while the arm is in transit, `physics.transit_sleep` 0; CG for 1 s after each Newton "
+    "stall, `physics.run_fallback_time` None): the `before21` setting",
 }
 
 
