@@ -568,7 +568,7 @@ def test_a_newton_step_left_unsolved_is_redone_by_cg(table_world) -> None:
         w.step(1)
         assert seen[0] == _SOLVERS["Newton"] and w._fallbacks == 1
         assert m.opt.solver == _SOLVERS["CG"]
-        assert w._fallback_steps == round(w.cfg.physics.fallback_time / m.opt.timestep) - 1
+        assert w._fallback_steps == round(w.fallback_time / m.opt.timestep) - 1
     finally:
         del w._unsolved
         _restore(w, state)
