@@ -666,7 +666,7 @@ class PhysicsConfig(Config):
     # the same once the scene has settled (every step outside ``settle_world``: the
     # interaction's); None: ``fallback_time``.  In the actions a grasped, taut hose stalls
     # Newton again and again: 0.25 s of CG instead of 1 s lets Newton, a few times cheaper per
-    # step where it converges, back sooner (issue 21: about 1 s of CPU less per default
+    # step where it converges, back sooner (issue 21: 0.4-1 s of CPU less per default
     # interaction; 0.1 s stalls it more often and saves no more).  The settle keeps
     # ``fallback_time``: the settled states and their cache keys do not depend on this.  A
     # file written before the field existed reruns with None (``_migrate``).
@@ -733,7 +733,7 @@ class PhysicsConfig(Config):
     # rest there and cost no collision or constraint solving; the hand, a hose it moves or a
     # force touching one wakes it, and every hose wakes at the first step after each motion
     # (the grasp, the hold check, the actions and the waits run with everything awake).
-    # Issue 21: about 1.7 s of CPU less per default interaction.  0 keeps everything awake
+    # Issue 21: 1-1.7 s of CPU less per default interaction.  0 keeps everything awake
     # throughout; a file written before the field existed reruns with 0 (``_migrate``).
     # Ignored while ``sleep_tolerance`` > 0 (sleep on throughout).  The settle does not move
     # the arm: the settled state and its cache key do not depend on it.
