@@ -789,12 +789,14 @@ class World:
         if tolerance <= 0 or m.opt.enableflags & flag:
             yield
             return
+        before = m.opt.sleep_tolerance
         m.opt.sleep_tolerance = tolerance
         m.opt.enableflags |= flag
         try:
             yield
         finally:
             m.opt.enableflags &= ~flag
+            m.opt.sleep_tolerance = before
 
     @contextmanager
     def hooks(

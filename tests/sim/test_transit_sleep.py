@@ -86,6 +86,7 @@ def test_a_transit_rests_the_untouched_hoses_and_every_tree_wakes_after(sessions
     w, robot, m = s.world, s.robot, s.world.model
     w.reset()
     before = w.all_hose_vertices().copy()
+    tolerance = m.opt.sleep_tolerance = 5e-4  # not transit_sleep's: it must come back
     watch = _Watch(w)
     with robot.transit(), w.hooks(after=[watch]):
         assert robot.move_joints(RETRACT_QPOS, 0.5)  # through free space: no hose touched
@@ -93,6 +94,7 @@ def test_a_transit_rests_the_untouched_hoses_and_every_tree_wakes_after(sessions
     assert not any(watch.hose_awake[-1]), "resting hoses the hand never touched should sleep"
     assert watch.awake[-1] < m.ntree
     assert not m.opt.enableflags & SLEEP  # off again after the transit
+    assert m.opt.sleep_tolerance == tolerance  # and the model's tolerance as it was
     w.step(1)
     assert w.data.ntree_awake == m.ntree  # and every tree awake at the next step
     moved = np.linalg.norm(w.all_hose_vertices() - before, axis=1).max()
