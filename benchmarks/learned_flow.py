@@ -1,14 +1,17 @@
 """The learned flow beside DIS and Farneback on held-out simulated clips, and its speed.
 
     .venv/bin/python -m benchmarks.learned_flow --data SPLIT [SPLIT ...] [--flow SPEC ...]
-        [--weights FILE] [--write]
+        [--weights FILE] [--truth normal_flow flow] [--validation] [--write]
 
 ``SPLIT`` is a MovingCables split folder of simulated test clips, made with seeds that neither
 training nor validation used, e.g.::
 
-    cablesim dataset movingcables --scenes 102000:102006 --split test --out data/lf-board
+    cablesim dataset movingcables --scenes 102000:102006 --split test --out runs/lf-board
     cablesim dataset movingcables --scenes 102500:102506 --split test --scene table \\
-        --out data/lf-table
+        --out runs/lf-table
+
+``--validation`` scores validation clips (those a training run validated on) to choose a
+setting, titled so, and ``--write`` then writes ``learned_flow_validation.md``.
 
 Each back end is scored with the published MovingCables protocol
 (:func:`cablesim.formats.movingcables.evaluate_clip`: flow from each image to the first, the
@@ -108,9 +111,10 @@ def report(
     speeds: dict[str, float],
     splits: list[Path],
     weights: str,
+    what: str = "held-out simulated clips",
 ) -> str:
     lines = [
-        "# The learned flow on held-out simulated clips (`python -m benchmarks.learned_flow`)",
+        f"# The learned flow on {what} (`python -m benchmarks.learned_flow`)",
         "",
         f"- date: {pv.utc_date()}; commit {pv.git_commit()}; machine: {pv.machine()}",
         f"- weights: `{weights}`",
@@ -156,28 +160,45 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--weights", default=None, help="weights for 'learned' (default: shipped)")
     ap.add_argument("--speed", nargs="*", default=None, help="back ends to time (default: --flow)")
     ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument(
+        "--truth",
+        nargs="+",
+        default=["normal_flow", "flow"],
+        choices=["normal_flow", "flow"],
+        help="ground truths to score against (default both)",
+    )
+    ap.add_argument(
+        "--validation",
+        action="store_true",
+        help="the clips are validation clips (choosing a setting): titled so, and --write "
+        "writes benchmarks/results/learned_flow_validation.md",
+    )
     ap.add_argument("--write", action="store_true", help="write benchmarks/results/learned_flow.md")
     args = ap.parse_args(argv)
     for s in args.data:
         list_clips(s)  # a bad folder stops here
-    flows = [with_weights(f, args.weights) for f in args.flow]
+    # rows are named as given; every learned back end runs --weights
+    flows = {f: with_weights(f, args.weights) for f in args.flow}
     results: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
-    for truth in ("normal_flow", "flow"):
+    for truth in args.truth:
         results[truth] = {}
-        for f in flows:
-            results[truth][f] = score(args.data, f, truth)
+        for f, spec in flows.items():
+            results[truth][f] = score(args.data, spec, truth)
             a = results[truth][f]["all"]
             print(
                 f"{truth:11s} {f:40s} IoU {a['iou']:.3f} P {a['precision']:.3f} "
                 f"R {a['recall']:.3f} EPE>1 {a['epe_gt_gt1']:.2f}",
                 flush=True,
             )
-    speeds = {f: speed(f, args.repeats) for f in (args.speed if args.speed is not None else flows)}
+    timed = args.speed if args.speed is not None else list(flows)
+    speeds = {f: speed(with_weights(f, args.weights), args.repeats) for f in timed}
     for f, v in speeds.items():
         print(f"speed {f}: {1000 * v:.1f} ms")
-    text = report(results, speeds, args.data, args.weights or "shipped default")
+    what = "simulated validation clips" if args.validation else "held-out simulated clips"
+    text = report(results, speeds, args.data, args.weights or "shipped default", what)
     if args.write:
-        write_results(RESULTS / "learned_flow.md", text)
+        name = "learned_flow_validation.md" if args.validation else "learned_flow.md"
+        write_results(RESULTS / name, text)
     else:
         print(text)
     return 0

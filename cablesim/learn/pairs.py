@@ -1,8 +1,10 @@
 """Training pairs for the learned flow from simulated MovingCables clips, with camera effects.
 
 A clip written by ``cablesim dataset movingcables`` holds every image of one interaction and
-the exact flow of each image back to the first (:mod:`cablesim.dataset.generate`); a pair is
-(image k, the first image, flow_first_back of image k), image1 being image k as in the
+the exact flow of each image back to the first and its normal flow
+(:mod:`cablesim.dataset.generate`); a pair is (image k, the first image, the flow of image k
+back to the first that the model is trained on: ``normal_flow_first_back`` for a model of
+``target="normal"``, ``flow_first_back`` for ``"flow"``), image1 being image k as in the
 published evaluation (:func:`cablesim.formats.movingcables.evaluate_clip`).
 
 :func:`make_pair` turns one such triple into a training sample, every draw from the generator
@@ -17,7 +19,7 @@ processes):
   balance), gamma, a Gaussian blur; on each image on its own: a brightness step
   (auto-exposure), sensor noise, JPEG compression (blocks and ringing, as H.264 leaves);
 - the network input of :func:`cablesim.perception.learned.prepare` (DIS on the degraded
-  images), the exact flow at the working size, the pixels with a known flow (the arm, dilated,
+  images), the exact (normal) flow at the working size, the pixels with a known flow (the arm, dilated,
   moves but has no ground truth) and the moving fraction (|flow| > ``moving_px``, area
   averaged when scaled down).
 """
@@ -35,6 +37,7 @@ from cablesim.config import Config, check_number, check_positive, check_range
 from cablesim.errors import ConfigError, RecordingError
 from cablesim.formats.movingcables import (
     FLOW_FOLDER,
+    NORMAL_FLOW_FOLDER,
     STICK_FOLDER,
     clip_indices,
     list_clips,
@@ -101,8 +104,10 @@ class ClipRef:
             raise RecordingError(f"cannot read {path}")
         return np.ascontiguousarray(img[..., ::-1])
 
-    def flow(self, index: int) -> np.ndarray:
-        path = self.split / FLOW_FOLDER / self.clip / f"{index:08d}.png"
+    def flow(self, index: int, normal: bool = False) -> np.ndarray:
+        """The exact flow of image ``index`` back to the first (``normal``: its normal flow)."""
+        folder = NORMAL_FLOW_FOLDER if normal else FLOW_FOLDER
+        path = self.split / folder / self.clip / f"{index:08d}.png"
         if not path.is_file():
             raise RecordingError(f"{path}: no ground-truth flow (a simulated clip has one)")
         return read_flow_png(path)[0]
@@ -273,7 +278,7 @@ class PairSource:
         return make_pair(
             clip.rgb(k),
             self._first_image(c),
-            clip.flow(k),
+            clip.flow(k, normal=self.model.target == "normal"),
             clip.stick(k),
             self.model,
             self.aug,

@@ -1,5 +1,6 @@
 """A MovingCables clip with analytic motion: a striped band (a cable) slides over a still
-textured background; its exact flow back to the first image is minus its shift."""
+textured background; its exact flow back to the first image is minus its shift, its normal
+flow that flow's component along the band's normal."""
 
 from __future__ import annotations
 
@@ -29,6 +30,17 @@ def band_image(h: int, w: int, shift: tuple[float, float], width: int) -> tuple[
     return rgb.astype(np.uint8), mask
 
 
+#: the unit normal of the band's centre line y = h/2 + 0.15 x
+BAND_NORMAL = np.array([-0.15, 1.0]) / np.hypot(0.15, 1.0)
+
+
+def normal_part(flow: tuple[float, float]) -> tuple[float, float]:
+    """The normal flow of a band point moving by ``flow``: its component along the normal."""
+    f = np.asarray(flow, np.float64)
+    n = float(f @ BAND_NORMAL) * BAND_NORMAL
+    return float(n[0]), float(n[1])
+
+
 def write_synthetic_clip(
     split: Path, clip: str, seed: int, frames: int = 6, size: tuple[int, int] = (240, 320)
 ) -> list[tuple[float, float]]:
@@ -44,7 +56,9 @@ def write_synthetic_clip(
         rgb = np.where(mask[..., None], band, bg)
         flow = np.zeros((h, w, 2), np.float32)
         flow[mask] = (-sx, -sy)
+        normal = np.zeros((h, w, 2), np.float32)
+        normal[mask] = normal_part((-sx, -sy))
         inst = mask.astype(np.uint16)
-        out.append(ClipFrame(2 * k + 1, np.ascontiguousarray(rgb), flow, flow, inst, None))
+        out.append(ClipFrame(2 * k + 1, np.ascontiguousarray(rgb), flow, normal, inst, None))
     write_clip(split, clip, out)
     return shifts

@@ -16,10 +16,12 @@ by :mod:`cablesim.perception.metrics`, the rules of the thesis protocol (SPEC se
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +37,7 @@ from cablesim.perception.correlation import (
 )
 from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow
 from cablesim.perception.flow_region import FlowRegion, RegionFlow
-from cablesim.perception.learned import LearnedFlow
+from cablesim.perception.learned import DEFAULT_WEIGHTS, LearnedFlow
 from cablesim.perception.methods import make_method
 from cablesim.perception.metrics import nanmean, score_mask
 from cablesim.perception.pipeline import StreamStatistics, plan_jobs
@@ -299,7 +301,18 @@ def compute_variants(
 def _stats_path(scene: Scene, noisy: bool, flow: str, sample: str) -> Path:
     if flow == "oracle" and SAMPLES[sample].photometric is None:
         noisy = False  # ground-truth flow and arm masks do not see the sensor noise
-    return scene.stats_path / ("noisy" if noisy else "clean") / flow / f"{sample}.npz"
+    return scene.stats_path / ("noisy" if noisy else "clean") / _flow_dir(flow) / f"{sample}.npz"
+
+
+@lru_cache(maxsize=1)
+def _weights_digest() -> str:
+    return hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest()[:12]
+
+
+def _flow_dir(flow: str) -> str:
+    """The statistics folder of ``flow``: the learned flow's names its weights (new weights
+    never read the statistics of the ones before)."""
+    return f"learned-{_weights_digest()}" if flow == "learned" else flow
 
 
 def save_stats(path: Path, st: StreamStatistics) -> None:
