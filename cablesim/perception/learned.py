@@ -29,14 +29,14 @@ it smooths away, and the noise it reports on plain regions.  A variant that also
 correlations of learned features (``arch="corr"``) learned no better in the same steps at 2.5
 times the cost.
 
-What the network's flow is trained to be matters more than its design: trained on the full
-optical flow (the weights shipped until 2026-12-06), whose component along a plain hose no
-image shows, its correction did not learn (its error on moving pixels stayed at DIS's);
-trained on the normal flow (``target="normal"``, the MovingCables evaluation's ground truth)
-the same network's flow is 38% closer to the truth than DIS's on moving pixels at the working
-size, and 15-20% closer on whole simulated images.  Its moving probability gates DIS medium
-best on the simulated validation clips, so that stays the default (``docs/perception.md`` has
-the measurements, on held-out simulated clips and on the real MovingCables clips).
+What the network's flow is trained to be: the weights shipped until 2026-12-06 were trained
+on the full optical flow, whose component along a plain hose no image shows; the shipped ones
+on the normal flow (``target="normal"``, the MovingCables evaluation's ground truth), which
+brings the network's flow from 30% to 38% below DIS's error on the validation pairs' moving
+pixels at the working size; on whole 640x480 images its gain over DIS medium is about 15%.
+Its moving probability gating DIS medium scores best on the simulated validation clips, so
+that is the default (``docs/perception.md`` has the measurements, on held-out simulated clips
+and on the real MovingCables clips, where it does not beat DIS).
 
 Weights are a ``torch.save`` dict ``{"format": "cablesim-learned-flow", "version": 1,
 "config": {...LearnedFlowConfig...}, "state_dict": {...}, "meta": {...}}``, loaded with
