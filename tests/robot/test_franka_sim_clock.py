@@ -114,7 +114,14 @@ def test_in_lockstep_a_stalled_client_loses_no_cycle_and_no_motion(tmp_path) -> 
             f"the host starved the client for {max(starved):.2f} s >= LOCKSTEP_WAIT "
             f"({LOCKSTEP_WAIT} s), {lost} cycle(s) lost: {violations[-3:]}"
         )
-    assert all(results), ([r.reason for r in results], lost, violations[-20:])
+    # the short facts first (pytest cuts a long message): whether the host starved the client,
+    # and whether franka-sim timed each violation as a host stall
+    assert all(results), (
+        f"lost {lost}, starved {starved}, longest silences {sorted(silences)[-3:]}, "
+        f"violations timed by the host {[v.host_timing for v in cycle_violations]}",
+        [r.reason for r in results],
+        violations[-20:],
+    )
     assert max(r.position_error for r in results) < 0.002, [r.position_error for r in results]
     # a lockstep cycle is lost only when the client stays silent for the whole LOCKSTEP_WAIT:
     # none of the provoked 2-12 ms stalls may cost one (a host that starves the client for
