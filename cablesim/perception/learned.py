@@ -153,34 +153,50 @@ def _classes() -> dict[str, Any]:
 
     class RefineNet(nn.Module):
         """DIS-refining U-Net (module docstring); ``forward(x)`` -> (B, 3, H, W): the flow
-        correction (2, in ``flow_norm`` units) and the moving logit."""
+        correction (2, in ``flow_norm`` units) and the moving logit.  A design may join
+        tensors of its own to the encoder's output at 1/2 and 1/4 (:meth:`joined`; their
+        channels from :meth:`_build_joined`), which the next encoder stage and the decoder's
+        skips then see."""
 
         def __init__(self, cfg: LearnedFlowConfig) -> None:
             super().__init__()
             self.cfg = cfg
             w, d = cfg.widths, cfg.decoder
+            e = self._build_joined()  # before the U-Net: its modules are drawn first
+            ins = (IN_CHANNELS, w[0] + e[0], w[1] + e[1], w[2])
             self.enc = nn.ModuleList(
                 [
                     nn.Sequential(block(cin, cout, 2), block(cout, cout))
-                    for cin, cout in zip((IN_CHANNELS, *w[:-1]), w, strict=True)
+                    for cin, cout in zip(ins, w, strict=True)
                 ]
             )
             self.dec = nn.ModuleList(
                 [
                     block(w[3] + w[2], d[0]),
-                    block(d[0] + w[1], d[1]),
-                    block(d[1] + w[0], d[2]),
+                    block(d[0] + w[1] + e[1], d[1]),
+                    block(d[1] + w[0] + e[0], d[2]),
                 ]
             )
             self.head = nn.Conv2d(d[2] + IN_CHANNELS, 3, 3, 1, 1)
             nn.init.zeros_(self.head.weight)  # starts as DIS itself, probability 1/2
             nn.init.zeros_(self.head.bias)
 
+        def _build_joined(self) -> tuple[int, int]:
+            """Build the modules of what :meth:`joined` returns; its channels at 1/2, 1/4."""
+            return 0, 0
+
+        def joined(self, x: Any) -> list[Any]:
+            """The tensors joined to the encoder's output at 1/2 and 1/4 (none here)."""
+            return []
+
         def forward(self, x: Any) -> Any:
+            extra = self.joined(x)
             skips = []
             y = x
-            for enc in self.enc:
+            for i, enc in enumerate(self.enc):
                 y = enc(y)
+                if i < len(extra):
+                    y = torch.cat([y, extra[i]], 1)
                 skips.append(y)
             for dec, skip in zip(self.dec, skips[-2::-1], strict=True):
                 y = F.interpolate(y, size=skip.shape[-2:], mode="bilinear", align_corners=False)
@@ -202,59 +218,31 @@ def _classes() -> dict[str, Any]:
             1,
         )
 
-    class CorrNet(nn.Module):
+    class CorrNet(RefineNet):
         """The U-Net of :class:`RefineNet` with local correlations: a small feature encoder
         (shared) on image1 and on image2 warped by DIS, their correlation at 1/2 and 1/4 of
         the working size joined to the U-Net's skips there.  Where DIS is right the warped
         image matches at zero displacement; where it is off by a few pixels (a thin hose
         whose motion DIS smoothed away) the correlation shows by how much."""
 
-        def __init__(self, cfg: LearnedFlowConfig) -> None:
-            super().__init__()
-            self.cfg = cfg
-            w, d, fw, rad = cfg.widths, cfg.decoder, cfg.features, cfg.corr_radius
-            nc = [(2 * r + 1) ** 2 for r in rad]
+        def _build_joined(self) -> tuple[int, int]:
+            fw = self.cfg.features
             self.feat = nn.ModuleList(
                 [
                     nn.Sequential(block(3, fw[0], 2), block(fw[0], fw[0])),
                     nn.Sequential(block(fw[0], fw[1], 2), block(fw[1], fw[1])),
                 ]
             )
-            ins = (IN_CHANNELS, w[0] + nc[0], w[1] + nc[1], w[2])
-            self.enc = nn.ModuleList(
-                [
-                    nn.Sequential(block(cin, cout, 2), block(cout, cout))
-                    for cin, cout in zip(ins, w, strict=True)
-                ]
-            )
-            self.dec = nn.ModuleList(
-                [
-                    block(w[3] + w[2], d[0]),
-                    block(d[0] + w[1] + nc[1], d[1]),
-                    block(d[1] + w[0] + nc[0], d[2]),
-                ]
-            )
-            self.head = nn.Conv2d(d[2] + IN_CHANNELS, 3, 3, 1, 1)
-            nn.init.zeros_(self.head.weight)  # starts as DIS itself, probability 1/2
-            nn.init.zeros_(self.head.bias)
+            r0, r1 = self.cfg.corr_radius
+            return (2 * r0 + 1) ** 2, (2 * r1 + 1) ** 2
 
-        def forward(self, x: Any) -> Any:
+        def joined(self, x: Any) -> list[Any]:
             a, b = x[:, 0:3], x[:, 6:9]  # image1 and image2 warped by DIS
             corrs = []
             for feat, r in zip(self.feat, self.cfg.corr_radius, strict=True):
                 a, b = feat(a), feat(b)
                 corrs.append(F.leaky_relu(correlation(a, b, int(r)), 0.1))
-            y0 = self.enc[0](x)
-            s0 = torch.cat([y0, corrs[0]], 1)
-            y1 = self.enc[1](s0)
-            s1 = torch.cat([y1, corrs[1]], 1)
-            y2 = self.enc[2](s1)
-            y = self.enc[3](y2)
-            for dec, skip in zip(self.dec, (y2, s1, s0), strict=True):
-                y = F.interpolate(y, size=skip.shape[-2:], mode="bilinear", align_corners=False)
-                y = dec(torch.cat([y, skip], 1))
-            y = F.interpolate(y, size=x.shape[-2:], mode="bilinear", align_corners=False)
-            return self.head(torch.cat([y, x], 1))
+            return corrs
 
     return {"unet": RefineNet, "corr": CorrNet, "correlation": correlation}
 

@@ -274,8 +274,8 @@ def test_weights_of_the_earlier_design_load_as_it(tmp_path):
 
 
 def test_the_correlation_peaks_at_the_shift():
-    """The correlation layer of the default design: image2's features shifted by (dx, dy)
-    correlate best with image1's at that displacement."""
+    """The correlation layer of the ``arch="corr"`` design: image2's features shifted by
+    (dx, dy) correlate best with image1's at that displacement."""
     from cablesim.perception.learned import _classes
 
     corr = _classes()["correlation"]
