@@ -391,6 +391,10 @@ class Exploration:
         inter = Interaction(k, ep.success, ep.reason, self.source, self.segment, grade)
         inter.outcome = ep.outcome
         inter.timings["episode"] = time.perf_counter() - t0
+        # the interaction's own stages (wall s): what an explore run spends where
+        inter.timings.update(
+            {f"episode_{k}": v for k, v in ep.timings.items() if not k.startswith("cpu_")}
+        )
         inter.episode = {
             "grasp_retries": ep.grasp_retries,
             "actions": [a.to_dict() for a in ep.actions],
@@ -490,7 +494,9 @@ class Exploration:
             )
         self.depth, self.K = target.depth, target.intrinsics
         if self.writer is not None:
+            t0 = time.perf_counter()
             self.writer.interaction(inter, stream, self.merger.votes, self.flow)
+            inter.timings["pictures_video"] = time.perf_counter() - t0
 
     def propose(self) -> np.ndarray | None:
         """The next segment on the merged votes (``None``: no reachable proposal)."""
@@ -573,8 +579,10 @@ def explore(
             f"scene seed {cfg.seed} ({len(session.world.hoses)} hoses, {w}x{h}) "
             f"ready in {session.build_time:.1f} s; hose of interest {hose}"
         )
+        t0 = time.perf_counter()
         start = session.capture()
         picked = session.pick_start()
+        t_pick = time.perf_counter() - t0
         say(f"start segment: {int(picked.mask.sum())} px at {picked.centre_px}")
         if writer is not None:
             writer.start(start.rgb, picked.mask)
@@ -590,6 +598,7 @@ def explore(
             None if record_to is None else Path(record_to),
         )
         run.result.timings["build"] = session.build_time
+        run.result.timings["start_segment"] = t_pick
         run.result.scene_draws = session.describe_draws()
         result = run.run()
         result.perturbations = list(session.perturbation.log)

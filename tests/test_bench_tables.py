@@ -1,0 +1,78 @@
+"""The tables two benchmarks compute, on hand-worked cases: the flow error by how far pixels
+moved (``benchmarks.flow_by_motion``) and where an explore run's wall time went
+(``benchmarks.bench_explore``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from benchmarks.bench_explore import STAGES, stages
+from benchmarks.flow_by_motion import Tally
+
+
+def _field(shape: tuple[int, int], u: np.ndarray) -> np.ndarray:
+    f = np.zeros((*shape, 2), np.float32)
+    f[..., 0] = u
+    return f
+
+
+def test_motion_bins_tell_missed_motion_from_tracked_motion() -> None:
+    # 3 px in one column, 10 px in another, still elsewhere (still pixels are not scored)
+    u = np.zeros((4, 4), np.float32)
+    u[:, 0], u[:, 1] = 3.0, 10.0
+    gt, known = _field(u.shape, u), np.ones(u.shape, bool)
+    zero, exact, half = Tally(), Tally(), Tally()
+    zero.add(gt, np.zeros_like(gt), known)
+    exact.add(gt, gt.copy(), known)
+    half.add(gt, gt * 0.6, known)  # error 0.4 |gt|: tracked, 60 % of the motion found
+    rows = {r["bin"]: r for r in zero.rows()}
+    assert rows["2-4 px"]["pixels"] == 4 and rows["8-16 px"]["pixels"] == 4
+    assert rows["1-2 px"]["pixels"] == 0
+    assert rows["2-4 px"]["epe"] == pytest.approx(3.0)  # a missed motion costs all of itself
+    assert rows["8-16 px"]["epe"] == pytest.approx(10.0)
+    assert rows["all > 1 px"]["epe"] == pytest.approx(6.5) == rows["all > 1 px"]["mean_true"]
+    assert rows["all > 1 px"]["found"] == 0.0 and rows["all > 1 px"]["tracked"] == 0.0
+    e = exact.rows()[-1]
+    assert e["epe"] == 0.0 and e["found"] == pytest.approx(1.0) and e["tracked"] == 1.0
+    h = half.rows()[-1]
+    assert h["found"] == pytest.approx(0.6) and h["tracked"] == 1.0
+    assert h["epe"] == pytest.approx(0.4 * 6.5)
+
+
+def test_unknown_pixels_are_left_out_of_the_motion_bins() -> None:
+    u = np.full((2, 2), 5.0, np.float32)
+    gt = _field(u.shape, u)
+    known = np.array([[True, False], [False, False]])
+    t = Tally()
+    t.add(gt, np.zeros_like(gt), known)
+    assert t.rows()[-1]["pixels"] == 1
+
+
+def test_explore_stages_add_up_to_the_wall_time(tmp_path: Path) -> None:
+    doc = {
+        "timings_s": {"build": 0.5, "start_segment": 0.1, "total": 10.0},
+        "interactions": [
+            {
+                "timings_s": {
+                    "episode": 7.0,
+                    "episode_grasp": 1.0,
+                    "episode_actions": 5.0,
+                    "episode_retreat": 0.5,
+                    "perception": 2.0,
+                    "pictures_video": 0.3,
+                }
+            }
+        ],
+    }
+    (tmp_path / "metrics.json").write_text(json.dumps(doc))
+    s = stages(tmp_path / "metrics.json", wall=11.0)
+    assert s is not None and tuple(s) == STAGES
+    assert s["start, imports"] == pytest.approx(1.0)  # the process outside explore's clock
+    assert s["interaction, other"] == pytest.approx(0.5)
+    assert s["other"] == pytest.approx(11.0 - 1.0 - 0.5 - 0.1 - 7.0 - 2.0 - 0.3)
+    assert sum(s.values()) == pytest.approx(11.0)
+    assert stages(tmp_path / "missing.json", 1.0) is None
