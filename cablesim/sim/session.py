@@ -41,8 +41,10 @@ least one other hose in the image.  It gets there deterministically:
 ``session.draws`` is the number of draws built (1 when the seed's own scene served),
 ``session.resamples`` says why each earlier draw was turned down, and ``session.cfg`` carries
 the draw that served (``cfg.scene.draw``), so that printing and re-running the config rebuilds
-the same scene, hose of interest and start segment at once.  Settled scenes and the outcome of a draw that did
-not settle are cached (:mod:`cablesim.sim.settle`), so a re-run costs no settling.
+the same scene, hose of interest and start segment at once.  Settled scenes and the outcome of
+a draw that did not settle are cached (:mod:`cablesim.sim.settle`), so a re-run costs no
+settling, and so is the verdict on a draw turned down for want of a graspable segment
+(:mod:`cablesim.sim.draw_cache`), so a re-run does not plan its candidates again.
 
 A session given a ``world`` (the environment and the tests reuse one) takes it as it is and
 picks nothing in advance (``pick_start`` raises ``NoGraspableSegmentError`` when the hose has no
@@ -73,6 +75,7 @@ from cablesim.outcomes import Outcome
 from cablesim.progress import Progress, Say, quiet
 from cablesim.recording import RecordingWriter
 from cablesim.seeding import stream
+from cablesim.sim import draw_cache
 from cablesim.sim.camera import SimCamera
 from cablesim.sim.clock import SimClock
 from cablesim.sim.config import EpisodeConfig
@@ -150,15 +153,29 @@ class SimSession(Session):
                 last = e
                 self.resamples.append({"draw": scene.draw, "outcome": e.outcome, "reason": str(e)})
                 continue
-            self._assemble(world)
-            try:
-                self.start = self._choose_start(scene.draw)
-            except NoGraspableSegmentError as e:
-                last = e
-                for r, n in e.reasons.items():
+            # a draw already planned and turned down is not planned again (sim.draw_cache)
+            use_cache = scene.physics.cache
+            key = draw_cache.key_description(world, cfg.replace(scene=scene)) if use_cache else {}
+            known = draw_cache.read_turned_down(key) if use_cache else None
+            turned: NoGraspableSegmentError | None = None
+            if known is not None:
+                turned = NoGraspableSegmentError(*known)
+            else:
+                self._assemble(world)
+                try:
+                    self.start = self._choose_start(scene.draw)
+                except NoGraspableSegmentError as no_segment:
+                    turned = no_segment
+                    self.camera.close()
+                    if use_cache:
+                        draw_cache.write_turned_down(key, str(turned), turned.reasons)
+            if turned is not None:
+                last = turned
+                for r, n in turned.reasons.items():
                     reasons[r] = reasons.get(r, 0) + n
-                self.resamples.append({"draw": scene.draw, "outcome": e.outcome, "reason": str(e)})
-                self.camera.close()
+                self.resamples.append(
+                    {"draw": scene.draw, "outcome": turned.outcome, "reason": str(turned)}
+                )
                 continue
             self.cfg = cfg.replace(scene=scene)
             return

@@ -82,6 +82,51 @@ def test_hose_without_graspable_segment_is_a_named_outcome() -> None:
     assert len(ep.draws["turned_down"]) == 2
 
 
+def test_a_turned_down_draw_is_not_planned_again(tmp_path, monkeypatch) -> None:
+    """The verdict "no graspable segment" on a draw is remembered (``sim.draw_cache``): a
+    second build of the config plans nothing and records the very same outcome, a corrupted
+    entry is planned again, and ``physics.cache = False`` neither reads nor writes entries."""
+    from cablesim.sim import draw_cache
+    from cablesim.sim import session as session_module
+
+    monkeypatch.setenv("CABLESIM_CACHE", str(tmp_path / "cache"))
+    planned: list[str] = []
+    real = session_module.choose_start
+
+    def counting(*args, **kwargs):
+        planned.append(args[-1])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(session_module, "choose_start", counting)
+    cfg = ungraspable(seed=6)
+
+    def build() -> NoGraspableSegmentError:
+        with pytest.raises(NoGraspableSegmentError) as e:
+            SimSession.build(cfg)
+        return e.value
+
+    first = build()
+    assert planned == ["draw 0", "draw 1"]
+    entries = sorted(draw_cache.cache_dir().glob("*.json"))
+    assert len(entries) == 2
+    again = build()
+    assert planned == ["draw 0", "draw 1"]  # served from the cache: nothing planned
+    assert str(again) == str(first) and again.reasons == first.reasons
+    assert again.resamples == first.resamples  # type: ignore[attr-defined]
+
+    entries[0].write_text("{not json")  # a corrupted entry is planned again and rewritten
+    third = build()
+    assert len(planned) == 3 and str(third) == str(first)
+    rewritten = json.loads(entries[0].read_text())
+    assert rewritten["message"] in [r["reason"] for r in first.resamples]  # type: ignore[attr-defined]
+
+    off = cfg.replace(scene=cfg.scene.replace(physics=PhysicsConfig(cache=False)))
+    with pytest.raises(NoGraspableSegmentError):
+        SimSession.build(off)
+    assert len(planned) == 5  # planned both draws
+    assert sorted(draw_cache.cache_dir().glob("*.json")) == entries  # and wrote nothing
+
+
 def test_the_seed_run_records_every_failure_and_goes_on() -> None:
     """The seed sweep's runner (:mod:`cablesim.sweep`): each failure is a row with its named
     outcome, including an error nothing anticipated; nothing is raised, so a run over many
