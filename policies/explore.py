@@ -393,7 +393,7 @@ class Exploration:
         inter.timings["episode"] = time.perf_counter() - t0
         # the interaction's own stages (wall s): what an explore run spends where
         inter.timings.update(
-            {f"episode_{k}": v for k, v in ep.timings.items() if not k.startswith("cpu_")}
+            {f"episode_{n}": v for n, v in ep.timings.items() if not n.startswith("cpu_")}
         )
         inter.episode = {
             "grasp_retries": ep.grasp_retries,
