@@ -22,21 +22,20 @@ the network sees what that flow explains and what it does not:
   nowhere) it is zero, so a still background gives no motion.
 
 Why this design rather than a RAFT- or PWC-like network: it trains on a 2-core CPU in
-minutes from a few thousand simulated pairs (DIS already solves the large displacements a
-cost volume would have to learn), and what it has to learn is where DIS fails on cables: the
-motion it drags from a moving hose onto the still board beside it, the motion of a thin hose
-it smooths away, and the noise it reports on plain regions.  A variant that also sees local
-correlations of learned features (``arch="corr"``) learned no better in the same steps at 2.5
-times the cost.
-
-What the network's flow is trained to be: the weights shipped until 2026-12-06 were trained
-on the full optical flow, whose component along a plain hose no image shows; the shipped ones
-on the normal flow (``target="normal"``, the MovingCables evaluation's ground truth), which
-brings the network's flow from 30% to 38% below DIS's error on the validation pairs' moving
-pixels at the working size; on whole 640x480 images its gain over DIS medium is about 15%.
-Its moving probability gating DIS medium scores best on the simulated validation clips, so
-that is the default (``docs/perception.md`` has the measurements, on held-out simulated clips
-and on the real MovingCables clips, where it does not beat DIS).
+minutes from a few thousand simulated pairs, where a network that learns correspondences from
+scratch does not (``benchmarks.raft_cost``).  The hope was that DIS solves the large
+displacements and that what is left to learn is where DIS fails on cables.  Measured since
+(``benchmarks.flow_by_motion``): DIS loses most hose motion beyond a few pixels, and the
+network's own flow does not recover it; it shrinks DIS's flow where that is mostly wrong
+(reporting about a tenth of the true motion on moving pixels), which lowers its error towards
+that of no motion at all.  What it does learn is where things move: its moving probability
+gating DIS medium scores best on the simulated validation clips, so that is the default
+(``docs/perception.md`` has the measurements, on held-out simulated clips and on the real
+MovingCables clips, where it does not beat DIS).  A variant that also sees local correlations
+of learned features (``arch="corr"``) learned no better in the same steps at 2.5 times the
+cost.  ``target`` chooses what the network's flow is trained to be: the normal flow (the
+MovingCables evaluation's ground truth, the default) or the full optical flow, whose component
+along a plain hose no image shows (the weights shipped until 2026-12-06).
 
 Weights are a ``torch.save`` dict ``{"format": "cablesim-learned-flow", "version": 1,
 "config": {...LearnedFlowConfig...}, "state_dict": {...}, "meta": {...}}``, loaded with
