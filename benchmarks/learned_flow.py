@@ -174,6 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         "writes benchmarks/results/learned_flow_validation.md",
     )
     ap.add_argument("--write", action="store_true", help="write benchmarks/results/learned_flow.md")
+    ap.add_argument("--out", type=Path, default=None, help="with --write: write this file instead")
     args = ap.parse_args(argv)
     for s in args.data:
         list_clips(s)  # a bad folder stops here
@@ -198,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     text = report(results, speeds, args.data, args.weights or "shipped default", what)
     if args.write:
         name = "learned_flow_validation.md" if args.validation else "learned_flow.md"
-        write_results(RESULTS / name, text)
+        write_results(args.out or RESULTS / name, text)
     else:
         print(text)
     return 0

@@ -14,7 +14,13 @@ from cablesim.errors import InputError
 from cablesim.learn.train import TrainConfig, train
 from cablesim.perception.learned import read_weights
 
-FLAGS = {"steps": "steps", "seed": "seed", "data_root": "data.root", "threads": "threads"}
+FLAGS = {
+    "steps": "steps",
+    "seed": "seed",
+    "data_root": "data.root",
+    "threads": "threads",
+    "device": "device",
+}
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -23,6 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None, help="seed of the network and the pairs (0)")
     p.add_argument("--data-root", default=None, help="where the simulated clips are made and found")
     p.add_argument("--threads", type=int, default=None, help="torch threads (2)")
+    p.add_argument("--device", default=None, help="cpu (default, bit for bit) or cuda (a GPU)")
     p.add_argument("--workers", type=int, default=2, help="processes making clips (2)")
     p.add_argument("--ray", help="make the clips on Ray: auto, an address, or local")
     p.add_argument("--export", type=Path, default=None, help="copy the final weights here as well")

@@ -153,6 +153,10 @@ class TrainConfig(Config):
     val_every: int = 250  # validation and checkpoint
     val_pairs: int = 64
     threads: int = 2  # torch threads
+    # where the network trains: "cpu" (bit for bit reproducible, resumable to the same
+    # weights) or "cuda" (a GPU: the same data and schedule, not bit for bit); the weights
+    # written run on the CPU either way
+    device: str = "cpu"
     model: LearnedFlowConfig = field(default_factory=LearnedFlowConfig)
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     data: DataConfig = field(default_factory=DataConfig)
@@ -172,6 +176,8 @@ class TrainConfig(Config):
             check_positive(f"train.{name}", getattr(self, name))
         for name in ("weight_decay", "moving_weight", "bce_weight"):
             check_positive(f"train.{name}", getattr(self, name), allow_zero=True)
+        if self.device not in ("cpu", "cuda"):
+            raise ConfigError("train.device", f"must be 'cpu' or 'cuda', got {self.device!r}")
         if self.lr_min > self.lr:
             raise ConfigError("train.lr_min", f"exceeds lr {self.lr}, got {self.lr_min}")
 
@@ -298,8 +304,8 @@ def _loss(torch: Any, out: Any, batch: dict[str, Any], cfg: TrainConfig) -> tupl
     return flow_l1 + cfg.bce_weight * bce, flow_l1, bce
 
 
-def _tensors(torch: Any, batch: dict[str, np.ndarray]) -> dict[str, Any]:
-    return {k: torch.from_numpy(v) for k, v in batch.items()}
+def _tensors(torch: Any, batch: dict[str, np.ndarray], device: str = "cpu") -> dict[str, Any]:
+    return {k: torch.from_numpy(v).to(device) for k, v in batch.items()}
 
 
 def validate(model: Any, pairs: list[dict[str, np.ndarray]], cfg: TrainConfig) -> dict[str, float]:
@@ -309,7 +315,7 @@ def validate(model: Any, pairs: list[dict[str, np.ndarray]], cfg: TrainConfig) -
     model.eval()
     with torch.inference_mode():
         for b in pairs:
-            out = model(torch.from_numpy(b["x"])).numpy()
+            out = model(torch.from_numpy(b["x"]).to(cfg.device)).cpu().numpy()
             for j in range(out.shape[0]):
                 flow = b["dis"][j] + out[j, :2] * cfg.model.flow_norm
                 flow = np.where(out[j, 2] < 0.0, 0.0, flow)  # probability < 1/2
@@ -403,8 +409,11 @@ def train(
     with OutputLock(run):
         cfg_path = run / "config.json"
         if cfg_path.is_file():
-            old = json.loads(cfg_path.read_text())
-            if old != json.loads(json.dumps(cfg.to_dict())):
+            try:  # as read now: a field added since takes its default
+                old = TrainConfig.from_dict(json.loads(cfg_path.read_text())).to_dict()
+            except (ValueError, ConfigError):
+                old = None
+            if old != cfg.to_dict():
                 raise InputError(
                     f"{run} holds a run of another config ({cfg_path}); resume it with "
                     f"--config {cfg_path}, or choose a new --out"
@@ -416,14 +425,16 @@ def train(
         train_clips, val_clips = clips_of(record, "train"), clips_of(record, "validation")
         say(f"{len(train_clips)} training clips, {len(val_clips)} validation clips")
 
+        if cfg.device == "cuda" and not torch.cuda.is_available():
+            raise InputError("train.device is 'cuda' but torch sees no GPU on this machine")
         torch.manual_seed(cfg.seed)
         torch.set_num_threads(cfg.threads)
-        model = build_model(cfg.model)
+        model = build_model(cfg.model).to(cfg.device)
         opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         state = RunState()
         ckpt_path = run / "checkpoint.pt"
         if ckpt_path.is_file():
-            ck = torch.load(ckpt_path, map_location="cpu", weights_only=True)
+            ck = torch.load(ckpt_path, map_location=cfg.device, weights_only=True)
             model.load_state_dict(ck["model"])
             opt.load_state_dict(ck["optimizer"])
             state = RunState(int(ck["step"]), float(ck["seconds"]))
@@ -450,7 +461,9 @@ def train(
                 if stop_at is not None and state.step >= stop_at:
                     _save_checkpoint(torch, ckpt_path, model, opt, state)
                     return None
-                batch = _tensors(torch, source.batch(state.step * cfg.batch, cfg.batch))
+                batch = _tensors(
+                    torch, source.batch(state.step * cfg.batch, cfg.batch), cfg.device
+                )
                 lr = _lr(cfg, state.step)
                 for g in opt.param_groups:
                     g["lr"] = lr

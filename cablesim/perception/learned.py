@@ -71,11 +71,14 @@ WEIGHTS_FORMAT = "cablesim-learned-flow"
 WEIGHTS_VERSION = 1
 #: the shipped default model (``cablesim train``'s export of ``configs/learned_flow.json``)
 DEFAULT_WEIGHTS = Path(__file__).with_name("weights") / "learned_flow.pt"
+#: other shipped models, by the name ``weights=`` takes for them: ``"raft"``, the RAFT design
+#: (``configs/learned_flow_raft.json``: finds the motion DIS loses, at about a second a flow)
+SHIPPED_WEIGHTS = {"raft": Path(__file__).with_name("weights") / "learned_flow_raft.pt"}
 #: input channels: image1 RGB, image2 RGB, image2 warped by DIS RGB, DIS flow (2), the
 #: photometric errors of the warped and of the unwarped image2
 IN_CHANNELS = 13
 #: the network designs (:class:`LearnedFlowConfig`'s ``arch``) and training targets
-ARCHS = ("unet", "corr")
+ARCHS = ("unet", "corr", "raft")
 TARGETS = ("normal", "flow")
 #: what the moving probability gates by default (:class:`LearnedFlow`'s ``base``)
 BASE_DEFAULT = "dis-medium"
@@ -104,6 +107,11 @@ class LearnedFlowConfig(Config):
     arch: str = "unet"
     features: tuple[int, int] = (16, 24)  # "corr": feature channels at 1/2 and 1/4
     corr_radius: tuple[int, int] = (4, 3)  # "corr": search radius in cells at 1/2 and 1/4
+    # "raft": RAFT-small (cablesim.perception.raft) on image1 and image2, its iterations
+    # started from the DIS flow: an all-pairs correlation volume that can find motion DIS
+    # lost; feature, hidden and context channels, and the update iterations
+    raft_dims: tuple[int, int, int] = (128, 96, 64)
+    raft_iters: int = 12
     # what the network's flow is trained to be: "normal" (the normal flow, the MovingCables
     # evaluation's ground truth: what the images show of a hose's motion, its component
     # along the hose being invisible on a plain hose) or "flow" (the full optical flow)
@@ -118,13 +126,16 @@ class LearnedFlowConfig(Config):
         return data
 
     def _validate(self) -> None:
-        for name in ("widths", "decoder", "features"):
+        for name in ("widths", "decoder", "features", "raft_dims"):
             for i, w in enumerate(getattr(self, name)):
                 check_int(f"{self.SECTION}.{name}[{i}]", w, 1)
         for i, r in enumerate(self.corr_radius):
             check_int(f"{self.SECTION}.corr_radius[{i}]", r, 1)
             if int(r) > 8:
                 raise ConfigError(f"{self.SECTION}.corr_radius[{i}]", f"must be <= 8, got {r}")
+        check_int(f"{self.SECTION}.raft_iters", self.raft_iters, 1)
+        if int(self.raft_iters) > 32:
+            raise ConfigError(f"{self.SECTION}.raft_iters", f"must be <= 32, got {self.raft_iters}")
         if self.arch not in ARCHS:
             raise ConfigError(f"{self.SECTION}.arch", f"must be one of {ARCHS}, got {self.arch!r}")
         if self.target not in TARGETS:
@@ -243,13 +254,45 @@ def _classes() -> dict[str, Any]:
                 corrs.append(F.leaky_relu(correlation(a, b, int(r)), 0.1))
             return corrs
 
-    return {"unet": RefineNet, "corr": CorrNet, "correlation": correlation}
+    class RaftRefine(nn.Module):
+        """RAFT-small (:mod:`cablesim.perception.raft`) on image1 and image2, its iterations
+        started from the DIS flow of the input (averaged to 1/8), with its last flow layer at
+        zero so that it starts as that DIS flow (smoothed); a two-layer head on the input and
+        the RAFT flow gives the moving logit.  Same input and output as :class:`RefineNet`:
+        the correction of the DIS flow (in ``flow_norm`` units) and the logit."""
+
+        def __init__(self, cfg: LearnedFlowConfig) -> None:
+            super().__init__()
+            from cablesim.perception.raft import RaftConfig, build_raft
+
+            self.cfg = cfg
+            f, h, c = (int(v) for v in cfg.raft_dims)
+            rc = RaftConfig(feature_dim=f, hidden_dim=h, context_dim=c, iters=cfg.raft_iters)
+            self.raft = build_raft(rc)
+            last = self.raft.update.flow_head[-1]
+            nn.init.zeros_(last.weight)
+            nn.init.zeros_(last.bias)
+            self.prob = nn.Sequential(block(IN_CHANNELS + 2, 16), nn.Conv2d(16, 1, 3, 1, 1))
+            nn.init.zeros_(self.prob[-1].weight)  # probability 1/2 at the start, as the U-Net
+            nn.init.zeros_(self.prob[-1].bias)
+
+        def forward(self, x: Any) -> Any:
+            norm = float(self.cfg.flow_norm)
+            h, w = x.shape[-2:]
+            xp = F.pad(x, (0, (-w) % 8, 0, (-h) % 8), mode="replicate")
+            a, b = 2.0 * xp[:, 0:3], 2.0 * xp[:, 3:6]  # image - 1/2 -> [-1, 1]
+            init = F.avg_pool2d(xp[:, 9:11] * norm, 8) / 8.0
+            flow = self.raft(a, b, flow_init=init)[:, :, :h, :w]
+            logit = self.prob(torch.cat([x, flow / norm], 1))
+            return torch.cat([flow / norm - x[:, 9:11], logit], 1)
+
+    return {"unet": RefineNet, "corr": CorrNet, "raft": RaftRefine, "correlation": correlation}
 
 
 def build_model(config: LearnedFlowConfig | None = None) -> Any:
     """A randomly initialised network of ``config`` (a ``torch.nn.Module``)."""
     cfg = config or LearnedFlowConfig()
-    return _classes()[cfg.arch](cfg)  # arch is checked: "unet" or "corr"
+    return _classes()[cfg.arch](cfg)  # arch is checked: one of ARCHS
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -347,7 +390,7 @@ def read_weights(path: str | Path) -> dict[str, Any]:
     if not path.is_file():
         hint = (
             " (the package ships it: reinstall cablesim, or make it with `cablesim train`)"
-            if path == DEFAULT_WEIGHTS
+            if path == DEFAULT_WEIGHTS or path in SHIPPED_WEIGHTS.values()
             else " (weights are never downloaded: make them with `cablesim train`)"
         )
         raise InputError(f"learned flow weights not found: {path}{hint}")
@@ -382,7 +425,8 @@ def load_model(path: str | Path) -> tuple[Any, dict[str, Any]]:
 class LearnedFlow(FlowEstimator):
     """DIS gated (or refined) by a network trained on cablesim's ground truth (module docstring).
 
-    ``weights``: a weights file (default: the shipped model, :data:`DEFAULT_WEIGHTS`);
+    ``weights``: a weights file, or the name of another shipped model
+    (:data:`SHIPPED_WEIGHTS`: ``"raft"``) (default: the shipped model, :data:`DEFAULT_WEIGHTS`);
     ``gate``: the moving probability below which the flow is zero (``None``: never zeroed);
     ``threads``: torch's intra-op threads (default: leave torch's setting alone);
     ``work_width``: run at this working width instead of the model's (the network is
@@ -415,7 +459,12 @@ class LearnedFlow(FlowEstimator):
             raise InputError(f"learned flow gate must be in [0, 1) or None, got {gate!r}")
         if threads is not None and not (is_int(threads) and int(threads) >= 1):
             raise InputError(f"learned flow threads must be an integer >= 1, got {threads!r}")
-        self.weights = Path(weights) if weights is not None else DEFAULT_WEIGHTS
+        if weights is None:
+            self.weights = DEFAULT_WEIGHTS
+        elif isinstance(weights, str) and weights in SHIPPED_WEIGHTS:
+            self.weights = SHIPPED_WEIGHTS[weights]
+        else:
+            self.weights = Path(weights)
         self.gate = None if gate is None else float(gate)
         self.threads = None if threads is None else int(threads)
         self.base = base

@@ -168,7 +168,10 @@ def _classes() -> dict[str, type]:
             up = torch.sum(mask * up, dim=2).permute(0, 1, 4, 2, 5, 3)
             return up.reshape(b, 2, 8 * h, 8 * w)
 
-        def forward(self, im1, im2, iters: int | None = None):
+        def forward(self, im1, im2, iters: int | None = None, flow_init=None):
+            """The flow from ``im1`` to ``im2`` (B, 2, H, W; images in [-1, 1], H and W
+            multiples of 8); ``flow_init`` (B, 2, H/8, W/8, in 1/8-resolution pixels) starts
+            the iterations from a flow instead of zero."""
             iters = self.cfg.iters if iters is None else iters
             f1, f2 = self.fnet(im1), self.fnet(im2)
             pyr = self._pyramid(f1, f2)
@@ -182,7 +185,7 @@ def _classes() -> dict[str, type]:
                 indexing="ij",
             )
             coords0 = torch.stack([xs, ys], 0).float()[None].repeat(b, 1, 1, 1)
-            coords1 = coords0.clone()
+            coords1 = coords0.clone() if flow_init is None else coords0 + flow_init
             up = None
             for _ in range(iters):
                 corr = self._lookup(pyr, coords1)

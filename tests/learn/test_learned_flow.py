@@ -294,7 +294,87 @@ def test_the_correlation_peaks_at_the_shift():
     assert out.shape == (2, 3, 45, 61) and not out.any()
 
 
+# RAFT-small made tiny: the same modules, few channels and two iterations
+TINY_RAFT = SMALL.replace(arch="raft", raft_dims=(16, 16, 8), raft_iters=2)
+
+
+def test_the_raft_design_starts_from_the_dis_flow():
+    """``arch="raft"``: untrained, its flow is the DIS flow it was given (its iterations start
+    there and its last flow layer is zero; the convex upsampling only blurs the image border),
+    at any image size, and its moving probability is 1/2."""
+    net = build_model(TINY_RAFT)
+    g = torch.Generator().manual_seed(0)
+    x = torch.rand(2, 13, 45, 61, generator=g) - 0.5
+    x[:, 9], x[:, 10] = 0.3, -0.2  # a DIS flow of (3, -2) px in flow_norm (10 px) units
+    with torch.inference_mode():
+        out = net(x)
+    assert out.shape == (2, 3, 45, 61)
+    torch.testing.assert_close(out[:, :2, 8:-8, 8:-8], torch.zeros(2, 2, 29, 45), atol=1e-5, rtol=0)
+    assert not out[:, 2].any()
+    # and what it returns moves with the DIS flow it is given
+    x[:, 9] = -0.5
+    with torch.inference_mode():
+        moved = net(x)
+    torch.testing.assert_close(moved[:, :2, 8:-8, 8:-8], out[:, :2, 8:-8, 8:-8], atol=1e-5, rtol=0)
+
+
+def test_the_raft_design_learns_and_loads_as_the_back_end(clips, tmp_path):
+    """The RAFT design fits a batch of the synthetic clips (its training loss falls by a
+    third in 30 steps), and what ``cablesim train`` writes for it is a learned flow back end,
+    correlation volume and all, that runs on the CPU."""
+    from cablesim.learn.train import _loss, _tensors
+
+    root, _ = clips
+    cfg = _config(root, 4).replace(model=TINY_RAFT)
+    torch.manual_seed(0)
+    net = build_model(TINY_RAFT)
+    src = PairSource(find_clips([root / "train"]), TINY_RAFT, cfg.augment, 0)
+    batch = _tensors(torch, src.batch(0, 4))
+    opt = torch.optim.AdamW(net.parameters(), lr=2e-3)
+    losses = []
+    for _ in range(30):
+        loss = _loss(torch, net(batch["x"]), batch, cfg)[0]
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert np.mean(losses[-5:]) < 0.67 * np.mean(losses[:5]), losses
+    weights = train(cfg, tmp_path / "run", workers=1, progress=False)
+    est = LearnedFlow(weights, gate=None, base="network")
+    assert est.cfg.arch == "raft"
+    img = band_image(120, 160, (0.0, 0.0), 6)[0]
+    flow = est.compute(img, band_image(120, 160, (2.0, 1.0), 6)[0])
+    assert flow.shape == (120, 160, 2) and np.isfinite(flow).all()
+
+
+def test_training_on_a_gpu_is_refused_without_one(clips, tmp_path):
+    root, _ = clips
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    with pytest.raises(InputError, match="train.device is 'cuda'"):
+        train(_config(root, 2).replace(device="cuda"), tmp_path / "run", workers=1, progress=False)
+    with pytest.raises(ConfigError, match="train.device"):
+        _config(root, 2).replace(device="tpu")
+
+
+def test_a_run_written_before_a_field_existed_resumes(clips, tmp_path):
+    """A run folder whose config.json lacks fields added since (``device``, the RAFT
+    design's) is the same config read now: it resumes instead of being refused."""
+    root, _ = clips
+    cfg = _config(root, 4)
+    run = tmp_path / "run"
+    assert train(cfg, run, workers=1, progress=False, stop_at=2) is None
+    doc = json.loads((run / "config.json").read_text())
+    del doc["device"], doc["model"]["raft_dims"], doc["model"]["raft_iters"]
+    (run / "config.json").write_text(json.dumps(doc))
+    assert train(cfg, run, workers=1, progress=False) is not None
+
+
 def test_configs_are_checked():
+    with pytest.raises(ConfigError, match="model.raft_iters"):
+        LearnedFlowConfig(raft_iters=0)
+    with pytest.raises(ConfigError, match=r"model.raft_dims\[2\]"):
+        LearnedFlowConfig(raft_dims=(16, 16, 0))
     with pytest.raises(ConfigError, match="model.work_width"):
         LearnedFlowConfig(work_width=10)
     with pytest.raises(ConfigError, match="model.arch.*'pwc'"):
