@@ -461,9 +461,7 @@ def train(
                 if stop_at is not None and state.step >= stop_at:
                     _save_checkpoint(torch, ckpt_path, model, opt, state)
                     return None
-                batch = _tensors(
-                    torch, source.batch(state.step * cfg.batch, cfg.batch), cfg.device
-                )
+                batch = _tensors(torch, source.batch(state.step * cfg.batch, cfg.batch), cfg.device)
                 lr = _lr(cfg, state.step)
                 for g in opt.param_groups:
                     g["lr"] = lr

@@ -65,6 +65,7 @@ from cablesim.perception.flow import (
     check_flow,
     make_flow,
 )
+from cablesim.perception.raft import RaftConfig, build_raft
 from cablesim.perception.torchfile import import_torch, load_torch_file
 
 WEIGHTS_FORMAT = "cablesim-learned-flow"
@@ -263,8 +264,6 @@ def _classes() -> dict[str, Any]:
 
         def __init__(self, cfg: LearnedFlowConfig) -> None:
             super().__init__()
-            from cablesim.perception.raft import RaftConfig, build_raft
-
             self.cfg = cfg
             f, h, c = (int(v) for v in cfg.raft_dims)
             rc = RaftConfig(feature_dim=f, hidden_dim=h, context_dim=c, iters=cfg.raft_iters)
