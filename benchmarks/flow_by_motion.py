@@ -63,31 +63,22 @@ class Tally:
             self.tracked[i] += (err[m] < 0.5 * mag[m]).sum()
 
     def rows(self) -> list[dict[str, float]]:
-        out = []
-        for i in range(len(BINS) - 1):
-            c = max(self.count[i], 1.0)
-            out.append(
-                {
-                    "bin": bin_label(i),
-                    "pixels": int(self.count[i]),
-                    "mean_true": self.true[i] / c,
-                    "epe": self.err[i] / c,
-                    "found": self.pred[i] / max(self.true[i], 1e-9),
-                    "tracked": self.tracked[i] / c,
-                }
-            )
-        c = max(self.count.sum(), 1.0)
-        out.append(
-            {
-                "bin": "all > 1 px",
-                "pixels": int(self.count.sum()),
-                "mean_true": self.true.sum() / c,
-                "epe": self.err.sum() / c,
-                "found": self.pred.sum() / max(self.true.sum(), 1e-9),
-                "tracked": self.tracked.sum() / c,
-            }
-        )
-        return out
+        """One row per bin, then the row of all moving pixels."""
+        sums = (self.count, self.true, self.err, self.pred, self.tracked)
+        per_bin = [(bin_label(i), *(a[i] for a in sums)) for i in range(len(BINS) - 1)]
+        return [_row(*r) for r in [*per_bin, ("all > 1 px", *(a.sum() for a in sums))]]
+
+
+def _row(label: str, count: float, true: float, err: float, pred: float, tracked: float) -> dict:
+    c = max(count, 1.0)
+    return {
+        "bin": label,
+        "pixels": int(count),
+        "mean_true": true / c,
+        "epe": err / c,
+        "found": pred / max(true, 1e-9),
+        "tracked": tracked / c,
+    }
 
 
 def measure(splits: list[Path], flows: list[str], every: int, truth: str) -> dict[str, Tally]:

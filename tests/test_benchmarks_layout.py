@@ -129,3 +129,24 @@ def test_the_learned_flow_benchmark_runs_every_learned_spec_with_the_given_weigh
     assert with_weights("learned,weights=b.pt", "a.pt") == "learned,weights=b.pt"
     assert with_weights("dis", "a.pt") == with_weights("dis", None) == "dis"
     assert with_weights("learned,gate=null", None) == "learned,gate=null"
+
+
+def test_realistic_flow_statistics_of_a_learned_flow_are_kept_per_weights_file(tmp_path) -> None:
+    """The cached statistics of any learned spec are named by the digest of the weights file
+    it runs (the shipped default, a shipped model by name, or a path), so other weights never
+    read them; other back ends keep their plain names."""
+    import hashlib
+
+    from benchmarks.experiments.realistic_flow.evaluate import _flow_dir
+    from cablesim.perception.learned import DEFAULT_WEIGHTS, SHIPPED_WEIGHTS
+
+    def sha(p) -> str:
+        return hashlib.sha256(p.read_bytes()).hexdigest()[:12]
+
+    assert _flow_dir("dis-fine-board") == "dis-fine-board"
+    assert _flow_dir("learned") == f"learned-{sha(DEFAULT_WEIGHTS)}"
+    raft = SHIPPED_WEIGHTS["raft"]
+    assert _flow_dir("learned,weights=raft") == f"learned,weights=raft-{sha(raft)}"
+    a = tmp_path / "a.pt"
+    a.write_bytes(b"one")
+    assert _flow_dir(f"learned,weights={a},gate=0.7") == f"learned,weights={a},gate=0.7-{sha(a)}"

@@ -381,6 +381,16 @@ def save_weights(
     return path
 
 
+def weights_path(weights: str | Path | None) -> Path:
+    """The file ``weights`` names: the shipped default for None, a shipped model by its name
+    (:data:`SHIPPED_WEIGHTS`), else the path itself."""
+    if weights is None:
+        return DEFAULT_WEIGHTS
+    if isinstance(weights, str) and weights in SHIPPED_WEIGHTS:
+        return SHIPPED_WEIGHTS[weights]
+    return Path(weights)
+
+
 def read_weights(path: str | Path) -> dict[str, Any]:
     """The checked contents of a weights file; ``InputError`` naming the file otherwise."""
     if path is None or str(path).strip() == "":
@@ -458,12 +468,7 @@ class LearnedFlow(FlowEstimator):
             raise InputError(f"learned flow gate must be in [0, 1) or None, got {gate!r}")
         if threads is not None and not (is_int(threads) and int(threads) >= 1):
             raise InputError(f"learned flow threads must be an integer >= 1, got {threads!r}")
-        if weights is None:
-            self.weights = DEFAULT_WEIGHTS
-        elif isinstance(weights, str) and weights in SHIPPED_WEIGHTS:
-            self.weights = SHIPPED_WEIGHTS[weights]
-        else:
-            self.weights = Path(weights)
+        self.weights = weights_path(weights)
         self.gate = None if gate is None else float(gate)
         self.threads = None if threads is None else int(threads)
         self.base = base

@@ -37,7 +37,7 @@ from cablesim.perception.correlation import (
 )
 from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow
 from cablesim.perception.flow_region import FlowRegion, RegionFlow
-from cablesim.perception.learned import DEFAULT_WEIGHTS, LearnedFlow
+from cablesim.perception.learned import LearnedFlow, weights_path
 from cablesim.perception.methods import make_method
 from cablesim.perception.metrics import nanmean, score_mask
 from cablesim.perception.pipeline import StreamStatistics, plan_jobs
@@ -49,6 +49,7 @@ from cablesim.perception.refine import (
     contrast_mask,
     foreground_mask,
 )
+from cablesim.perception.registry import parse_spec
 from cablesim.perception.segmentation import SegmentationAccumulator, SegmentationResult
 from cablesim.perception.tuning import TuningResult, TuningRow, tune_thresholds
 
@@ -304,15 +305,19 @@ def _stats_path(scene: Scene, noisy: bool, flow: str, sample: str) -> Path:
     return scene.stats_path / ("noisy" if noisy else "clean") / _flow_dir(flow) / f"{sample}.npz"
 
 
-@lru_cache(maxsize=1)
-def _weights_digest() -> str:
-    return hashlib.sha256(DEFAULT_WEIGHTS.read_bytes()).hexdigest()[:12]
+@lru_cache(maxsize=8)
+def _weights_digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:12]
 
 
 def _flow_dir(flow: str) -> str:
-    """The statistics folder of ``flow``: the learned flow's names its weights (new weights
-    never read the statistics of the ones before)."""
-    return f"learned-{_weights_digest()}" if flow == "learned" else flow
+    """The statistics folder of ``flow``: a learned flow's names the weights file it runs
+    (``learned`` -> ``learned-<sha12>``; new weights never read the statistics of the ones
+    before, whichever file or shipped name the spec gives)."""
+    spec = parse_spec(flow, "flow")
+    if spec.target != "learned":
+        return flow
+    return f"{flow}-{_weights_digest(weights_path(spec.params.get('weights')))}"
 
 
 def save_stats(path: Path, st: StreamStatistics) -> None:
