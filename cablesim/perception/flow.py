@@ -354,8 +354,9 @@ FLOW_BACKENDS.register(
 FLOW_BACKENDS.register(
     "learned",
     "cablesim.perception.learned:LearnedFlow",
-    "DIS medium gated by a network trained on cablesim's exact flow (torch; weights=FILE, "
-    "gate=P, base=network|dis|SPEC)",
+    "DIS medium gated by a network trained on cablesim's exact flow (torch; weights=FILE|raft, "
+    "gate=P, base=network|dis|SPEC, work_width=W, enlarge=true; the RAFT design: iters=N, "
+    "warm=true)",
 )
 FLOW_BACKENDS.register(
     "oracle", OracleFlow, "the simulator's ground-truth flow (simulated streams only)"

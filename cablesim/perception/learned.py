@@ -47,6 +47,7 @@ nothing is ever downloaded.  torch is imported on first use (``pip install 'cabl
 
 from __future__ import annotations
 
+import hashlib
 import os
 from dataclasses import dataclass
 from functools import lru_cache
@@ -275,13 +276,21 @@ def _classes() -> dict[str, Any]:
             nn.init.zeros_(self.prob[-1].weight)  # probability 1/2 at the start, as the U-Net
             nn.init.zeros_(self.prob[-1].bias)
 
-        def forward(self, x: Any) -> Any:
+        def forward(self, x: Any, start: Any = None, iters: int | None = None) -> Any:
+            """``start`` (B, 2, H, W, px at the working size): a flow to start the
+            iterations from instead of the input's DIS flow (a warm start: the flow found
+            for the image before in a sequence); ``iters``: update iterations (default:
+            the trained ``raft_iters``)."""
             norm = float(self.cfg.flow_norm)
             h, w = x.shape[-2:]
             xp = F.pad(x, (0, (-w) % 8, 0, (-h) % 8), mode="replicate")
             a, b = 2.0 * xp[:, 0:3], 2.0 * xp[:, 3:6]  # image - 1/2 -> [-1, 1]
-            init = F.avg_pool2d(xp[:, 9:11] * norm, 8) / 8.0
-            flow = self.raft(a, b, flow_init=init)[:, :, :h, :w]
+            if start is None:
+                init = F.avg_pool2d(xp[:, 9:11] * norm, 8) / 8.0
+            else:
+                init = F.avg_pool2d(F.pad(start, (0, (-w) % 8, 0, (-h) % 8), mode="replicate"), 8)
+                init = init / 8.0
+            flow = self.raft(a, b, iters=iters, flow_init=init)[:, :, :h, :w]
             logit = self.prob(torch.cat([x, flow / norm], 1))
             return torch.cat([flow / norm - x[:, 9:11], logit], 1)
 
@@ -295,10 +304,10 @@ def build_model(config: LearnedFlowConfig | None = None) -> Any:
 
 
 # ----------------------------------------------------------------------------- inputs
-def work_size(width: int, height: int, work_width: int) -> tuple[int, int]:
-    """(w, h) of the working images: ``width`` scaled to ``work_width`` (never enlarged),
-    the aspect kept."""
-    if width <= work_width:
+def work_size(width: int, height: int, work_width: int, enlarge: bool = False) -> tuple[int, int]:
+    """(w, h) of the working images: ``width`` scaled to ``work_width`` (a narrower image
+    enlarged only with ``enlarge``), the aspect kept."""
+    if width == work_width or (width < work_width and not enlarge):
         return width, height
     s = work_width / width
     return work_width, max(1, round(height * s))
@@ -338,15 +347,17 @@ def network_input(
 
 
 def prepare(
-    rgb1: np.ndarray, rgb2: np.ndarray, cfg: LearnedFlowConfig
+    rgb1: np.ndarray, rgb2: np.ndarray, cfg: LearnedFlowConfig, enlarge: bool = False
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """(network input, DIS flow at the working size, scale) for two full-size RGB images; the
-    same steps at training and at inference time."""
+    same steps at training and at inference time (``enlarge``: images narrower than the
+    working width are enlarged to it, bicubic)."""
     h, w = rgb1.shape[:2]
-    ww, wh = work_size(w, h, cfg.work_width)
+    ww, wh = work_size(w, h, cfg.work_width, enlarge)
     if (ww, wh) != (w, h):
-        rgb1 = cv2.resize(rgb1, (ww, wh), interpolation=cv2.INTER_AREA)
-        rgb2 = cv2.resize(rgb2, (ww, wh), interpolation=cv2.INTER_AREA)
+        how = cv2.INTER_AREA if ww < w else cv2.INTER_CUBIC
+        rgb1 = cv2.resize(rgb1, (ww, wh), interpolation=how)
+        rgb2 = cv2.resize(rgb2, (ww, wh), interpolation=how)
     g1 = cv2.cvtColor(rgb1, cv2.COLOR_RGB2GRAY)
     g2 = cv2.cvtColor(rgb2, cv2.COLOR_RGB2GRAY)
     flow = dis_flow(g1, g2, cfg.dis_preset)
@@ -443,7 +454,16 @@ class LearnedFlow(FlowEstimator):
     ``base``: the flow the moving probability gates: ``"network"`` (DIS plus the network's
     correction), ``"dis"`` (the working-size DIS flow the network was given, the network only
     deciding where things move: no extra cost) or any other flow back-end spec, computed at
-    the input size (e.g. ``"dis-medium"``).
+    the input size (e.g. ``"dis-medium"``);
+    ``iters``: the RAFT design's update iterations (default: as trained);
+    ``warm``: the RAFT design on a sequence against one reference image (a clip's images to
+    its first, a stream's frames to its target): each flow starts from the flow found for the
+    image before it against the same reference (the same bytes), not from DIS, so motion
+    that grows a little per image is followed beyond what DIS finds.  The flow then depends
+    on the images computed before it; a new reference (or :meth:`reset`) starts from DIS;
+    ``enlarge``: images narrower than the working width are enlarged to it (bicubic) and the
+    flow and probability brought back, so that a hose is as many pixels wide as in training
+    (the MovingCables panels are 275 px wide, the RAFT design's working width 640).
     """
 
     name = "learned"
@@ -455,6 +475,9 @@ class LearnedFlow(FlowEstimator):
         threads: int | None = None,
         work_width: int | None = None,
         base: str = BASE_DEFAULT,
+        iters: int | None = None,
+        warm: bool = False,
+        enlarge: bool = False,
     ) -> None:
         if not isinstance(base, str) or not base.strip():
             raise InputError(
@@ -473,8 +496,22 @@ class LearnedFlow(FlowEstimator):
         self.threads = None if threads is None else int(threads)
         self.base = base
         self._base = None if base in ("network", "dis") else make_flow(base)
+        if iters is not None and not (is_int(iters) and 1 <= int(iters) <= 32):
+            raise InputError(f"learned flow iters must be an integer in [1, 32], got {iters!r}")
+        for name, value in (("warm", warm), ("enlarge", enlarge)):
+            if not isinstance(value, bool):
+                raise InputError(f"learned flow {name} must be true or false, got {value!r}")
         self.model, self.meta = load_model(self.weights)
         self.cfg: LearnedFlowConfig = self.model.cfg
+        if (iters is not None or warm) and self.cfg.arch != "raft":
+            raise InputError(
+                f"learned flow iters and warm need a model of arch 'raft'; {self.weights} "
+                f"holds arch {self.cfg.arch!r}"
+            )
+        self.iters = None if iters is None else int(iters)
+        self.warm = warm
+        self.enlarge = enlarge
+        self._last: tuple[bytes, tuple[int, ...], np.ndarray] | None = None
         if work_width is not None:
             try:
                 self.cfg = self.cfg.replace(work_width=work_width)
@@ -488,16 +525,28 @@ class LearnedFlow(FlowEstimator):
         _check_pair(image1, image2)
         rgb1, rgb2 = (_rgb(image1), _rgb(image2))
         h, w = rgb1.shape[:2]
-        x, dis, scale = prepare(rgb1, rgb2, self.cfg)
+        x, dis, scale = prepare(rgb1, rgb2, self.cfg, self.enlarge)
         old = torch.get_num_threads()
         if self.threads is not None:
             torch.set_num_threads(self.threads)
+        key = hashlib.blake2b(np.ascontiguousarray(image2).data, digest_size=16).digest()
+        start = None
+        if self.warm and self._last is not None and self._last[:2] == (key, x.shape):
+            start = torch.from_numpy(self._last[2])[None]
         try:
             with torch.inference_mode():
-                out = self.model(torch.from_numpy(x)[None])[0].numpy()
+                if self.cfg.arch == "raft":
+                    out = self.model(torch.from_numpy(x)[None], start, self.iters)[0].numpy()
+                else:
+                    out = self.model(torch.from_numpy(x)[None])[0].numpy()
         finally:
             if self.threads is not None:
                 torch.set_num_threads(old)
+        if self.warm:  # the network's flow at the working size, before any gate
+            own = x[9:11] * np.float32(self.cfg.flow_norm) + out[:2] * np.float32(
+                self.cfg.flow_norm
+            )
+            self._last = (key, x.shape, np.ascontiguousarray(own, np.float32))
         prob = 0.5 + 0.5 * np.tanh(0.5 * out[2])  # the logistic function, without overflow
         if self._base is not None:
             flow = self._base.compute(image1, image2)
@@ -511,6 +560,10 @@ class LearnedFlow(FlowEstimator):
             prob = cv2.resize(prob, (w, h), interpolation=cv2.INTER_LINEAR)
         return np.ascontiguousarray(flow, np.float32), np.ascontiguousarray(prob, np.float32)
 
+    def reset(self) -> None:
+        """Forget the sequence (``warm``): the next flow starts from DIS."""
+        self._last = None
+
     def compute(self, image1: np.ndarray, image2: np.ndarray) -> np.ndarray:
         flow, prob = self.predict(image1, image2)
         if self.gate is not None:
@@ -523,6 +576,9 @@ class LearnedFlow(FlowEstimator):
             "weights": str(self.weights),
             "gate": self.gate,
             "base": self.base,
+            "iters": self.iters,
+            "warm": self.warm,
+            "enlarge": self.enlarge,
             "config": self.cfg.to_dict(),
             "trained": {k: self.meta[k] for k in ("commit", "run", "steps") if k in self.meta},
         }
