@@ -1,6 +1,7 @@
 """The tables two benchmarks compute, on hand-worked cases: the flow error by how far pixels
 moved (``benchmarks.flow_by_motion``) and where an explore run's wall time went
-(``benchmarks.bench_explore``)."""
+(``benchmarks.bench_explore``), and the learned flow's per-clip table with the arm's share of
+the view (``benchmarks.learned_flow``)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ import pytest
 
 from benchmarks.bench_explore import STAGES, stages
 from benchmarks.flow_by_motion import Tally
+from benchmarks.learned_flow import arm_shares, clip_table
+from cablesim.formats.movingcables import ClipFrame, write_clip
 
 
 def _field(shape: tuple[int, int], u: np.ndarray) -> np.ndarray:
@@ -76,3 +79,31 @@ def test_explore_stages_add_up_to_the_wall_time(tmp_path: Path) -> None:
     assert s["other"] == pytest.approx(11.0 - 1.0 - 0.5 - 0.1 - 7.0 - 2.0 - 0.3)
     assert sum(s.values()) == pytest.approx(11.0)
     assert stages(tmp_path / "missing.json", 1.0) is None
+
+
+def test_the_per_clip_table_gives_each_clip_its_arm_share_and_errors(tmp_path: Path) -> None:
+    split = tmp_path / "lf" / "test"
+    rgb = np.zeros((4, 5, 3), np.uint8)
+    flow = np.zeros((4, 5, 2), np.float32)
+    inst = np.zeros((4, 5), np.uint16)
+    for clip, covered in (("0001", 2), ("0002", 15)):
+        frames = []
+        for i, n in enumerate((0, covered)):  # the arm covers n of the 20 pixels
+            stick = np.zeros(20, bool)
+            stick[:n] = True
+            frames.append(ClipFrame(2 * i + 1, rgb, flow, flow, inst, stick.reshape(4, 5)))
+        write_clip(split, clip, frames)
+    shares = arm_shares([split])
+    assert shares == {"lf/test/0001": 0.1, "lf/test/0002": 0.75}
+    per_clip = {
+        "dis": {"lf/test/0001": {"epe_gt_gt1": 1.234}, "lf/test/0002": {"epe_gt_gt1": 36.6}},
+        "raft": {"lf/test/0001": {"epe_gt_gt1": 0.5}, "lf/test/0002": {"epe_gt_gt1": 40.0}},
+    }
+    rows = clip_table(per_clip, shares)
+    assert (
+        rows[0] == "| clip | arm's largest share of the image | dis EPE > 1 px | raft EPE > 1 px |"
+    )
+    assert rows[2:] == [
+        "| lf/test/0001 | 0.10 | 1.23 | 0.50 |",
+        "| lf/test/0002 | 0.75 | 36.60 | 40.00 |",
+    ]

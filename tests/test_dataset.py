@@ -110,6 +110,9 @@ def test_movingcables_clips_read_back_and_do_not_depend_on_workers(tmp_path):
         frames = list(read_clip(split, name))
         assert [f.index for f in frames] == list(range(1, 2 * len(frames), 2))
         assert len(frames) == recs[name]["images"] > 10
+        # the record's arm share is the largest share of an image the written stick covers
+        share = max(float(np.mean(f.stick_mask)) for f in frames)
+        assert recs[name]["arm_share_max"] == pytest.approx(share, abs=1e-4) and share > 0
         assert np.all(frames[0].flow == 0)  # the first image against itself
         moving = int(recs[name]["hose"]) + 1  # instance id of the moved hose
         peak = 0.0

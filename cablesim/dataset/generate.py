@@ -211,6 +211,11 @@ def clip_motion(seed: int, motion: dict[str, Any] | None) -> tuple[str, float]:
     return direction, float(lo + (hi - lo) * rng.random())
 
 
+def arm_share(sticks: list[np.ndarray]) -> float:
+    """The largest share of an image that the arm's (dilated) mask covers in a clip."""
+    return round(max((float(np.mean(m)) for m in sticks), default=0.0), 4)
+
+
 def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     """Job: one MovingCables clip (params: seed, clip number, split, root, scene, periods,
     motion: see :func:`clip_motion`)."""
@@ -241,6 +246,9 @@ def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
             "moving_pixels_last": int(
                 np.count_nonzero(np.linalg.norm(clip.normal_flow[-1], axis=2) > 1.0)
             ),
+            # the largest share of an image the arm (the stick) covers: on the table the arm
+            # can come between the camera and the hoses (up to 0.95 of the view)
+            "arm_share_max": arm_share(clip.stick),
         },
         "timings": {"simulate_s": t_sim, "write_s": time.perf_counter() - t0 - t_sim},
     }
