@@ -242,7 +242,14 @@ def main(argv: list[str] | None = None) -> int:
     for f, v in speeds.items():
         print(f"speed {f}: {1000 * v:.1f} ms")
     what = "simulated validation clips" if args.validation else "held-out simulated clips"
-    text = report(results, speeds, args.data, args.weights or "shipped default", what, per_clip)
+    text = report(
+        results,
+        speeds,
+        args.data,
+        args.weights or "as each row names it; rows without weights= run the shipped default",
+        what,
+        per_clip,
+    )
     if args.write:
         name = "learned_flow_validation.md" if args.validation else "learned_flow.md"
         write_results(args.out or RESULTS / name, text)
