@@ -529,10 +529,11 @@ class LearnedFlow(FlowEstimator):
         old = torch.get_num_threads()
         if self.threads is not None:
             torch.set_num_threads(self.threads)
-        key = hashlib.blake2b(np.ascontiguousarray(image2).data, digest_size=16).digest()
-        start = None
-        if self.warm and self._last is not None and self._last[:2] == (key, x.shape):
-            start = torch.from_numpy(self._last[2])[None]
+        start, key = None, b""
+        if self.warm:  # the reference image by its bytes
+            key = hashlib.blake2b(np.ascontiguousarray(image2).data, digest_size=16).digest()
+            if self._last is not None and self._last[:2] == (key, x.shape):
+                start = torch.from_numpy(self._last[2])[None]
         try:
             with torch.inference_mode():
                 if self.cfg.arch == "raft":
@@ -543,9 +544,7 @@ class LearnedFlow(FlowEstimator):
             if self.threads is not None:
                 torch.set_num_threads(old)
         if self.warm:  # the network's flow at the working size, before any gate
-            own = x[9:11] * np.float32(self.cfg.flow_norm) + out[:2] * np.float32(
-                self.cfg.flow_norm
-            )
+            own = (x[9:11] + out[:2]) * np.float32(self.cfg.flow_norm)
             self._last = (key, x.shape, np.ascontiguousarray(own, np.float32))
         prob = 0.5 + 0.5 * np.tanh(0.5 * out[2])  # the logistic function, without overflow
         if self._base is not None:
