@@ -36,7 +36,12 @@ import numpy as np
 
 from benchmarks import RESULTS, write_results
 from cablesim import provenance as pv
-from cablesim.formats.movingcables import evaluate_clip, list_clips, read_clip
+from cablesim.formats.movingcables import (
+    arm_share,
+    evaluate_clip,
+    list_clips,
+    read_stick_masks,
+)
 from cablesim.perception.flow import FlowEstimator, make_flow
 from cablesim.perception.metrics import movingcables_summary
 
@@ -76,12 +81,11 @@ def score(
 def arm_shares(splits: list[Path]) -> dict[str, float]:
     """Per clip (``folder/split/clip``): the largest share of an image that the arm, the
     clip's stick, covers (the table's camera can see mostly arm)."""
-    out = {}
-    for split in splits:
-        for clip in list_clips(split):
-            shares = [float(np.mean(fr.stick_mask)) for fr in read_clip(split, clip)]
-            out[f"{_name(split)}/{clip}"] = max(shares, default=0.0)
-    return out
+    return {
+        f"{_name(split)}/{clip}": arm_share(read_stick_masks(split, clip))
+        for split in splits
+        for clip in list_clips(split)
+    }
 
 
 def clip_table(

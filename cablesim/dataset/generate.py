@@ -34,7 +34,7 @@ from cablesim.dataset.randomize import Randomization, randomize_scene
 from cablesim.errors import CablesimError, InputError
 from cablesim.files import commit, staged
 from cablesim.formats.mcor import sequence_name, write_annotation, write_mcor
-from cablesim.formats.movingcables import ClipFrame, labels_to_instances, write_clip
+from cablesim.formats.movingcables import ClipFrame, arm_share, labels_to_instances, write_clip
 from cablesim.seeding import stream
 from cablesim.sim.config import EpisodeConfig, SceneConfig
 from cablesim.sim.flow_gt import gt_flow
@@ -211,11 +211,6 @@ def clip_motion(seed: int, motion: dict[str, Any] | None) -> tuple[str, float]:
     return direction, float(lo + (hi - lo) * rng.random())
 
 
-def arm_share(sticks: list[np.ndarray]) -> float:
-    """The largest share of an image that the arm's (dilated) mask covers in a clip."""
-    return round(max((float(np.mean(m)) for m in sticks), default=0.0), 4)
-
-
 def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     """Job: one MovingCables clip (params: seed, clip number, split, root, scene, periods,
     motion: see :func:`clip_motion`)."""
@@ -248,7 +243,7 @@ def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
             ),
             # the largest share of an image the arm (the stick) covers: on the table the arm
             # can come between the camera and the hoses (up to 0.95 of the view)
-            "arm_share_max": arm_share(clip.stick),
+            "arm_share_max": round(arm_share(clip.stick), 4),
         },
         "timings": {"simulate_s": t_sim, "write_s": time.perf_counter() - t0 - t_sim},
     }

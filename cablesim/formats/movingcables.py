@@ -223,11 +223,29 @@ def read_clip(split: str | Path, clip: str, stick_masks: bool = True) -> Iterato
                 fr.instances = inst
         p = split / STICK_FOLDER / clip / _name(idx)
         if stick_masks and p.is_file():
-            m = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-            if m is None:
-                raise RecordingError(f"cannot read {p}")
-            fr.stick_mask = (m if m.ndim == 2 else m.max(axis=2)) > 0
+            fr.stick_mask = _read_stick(p)
         yield fr
+
+
+def _read_stick(path: Path) -> np.ndarray:
+    m = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if m is None:
+        raise RecordingError(f"cannot read {path}")
+    return (m if m.ndim == 2 else m.max(axis=2)) > 0
+
+
+def read_stick_masks(split: str | Path, clip: str) -> list[np.ndarray]:
+    """The stick masks of a clip's images, in order (the images that have one), read without
+    the images and their flows."""
+    split = Path(split)
+    paths = (split / STICK_FOLDER / clip / _name(i) for i in clip_indices(split, clip))
+    return [_read_stick(p) for p in paths if p.is_file()]
+
+
+def arm_share(sticks: Iterable[np.ndarray]) -> float:
+    """The largest share of an image that a clip's stick (a simulated clip's arm, dilated)
+    covers; 0 without masks."""
+    return max((float(np.mean(m)) for m in sticks), default=0.0)
 
 
 def write_clip(split: str | Path, clip: str, frames: Iterable[ClipFrame]) -> Path:

@@ -283,13 +283,11 @@ def _classes() -> dict[str, Any]:
             the trained ``raft_iters``)."""
             norm = float(self.cfg.flow_norm)
             h, w = x.shape[-2:]
-            xp = F.pad(x, (0, (-w) % 8, 0, (-h) % 8), mode="replicate")
+            pad = (0, (-w) % 8, 0, (-h) % 8)
+            xp = F.pad(x, pad, mode="replicate")
             a, b = 2.0 * xp[:, 0:3], 2.0 * xp[:, 3:6]  # image - 1/2 -> [-1, 1]
-            if start is None:
-                init = F.avg_pool2d(xp[:, 9:11] * norm, 8) / 8.0
-            else:
-                init = F.avg_pool2d(F.pad(start, (0, (-w) % 8, 0, (-h) % 8), mode="replicate"), 8)
-                init = init / 8.0
+            first = xp[:, 9:11] * norm if start is None else F.pad(start, pad, mode="replicate")
+            init = F.avg_pool2d(first, 8) / 8.0
             flow = self.raft(a, b, iters=iters, flow_init=init)[:, :, :h, :w]
             logit = self.prob(torch.cat([x, flow / norm], 1))
             return torch.cat([flow / norm - x[:, 9:11], logit], 1)
