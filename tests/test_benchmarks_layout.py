@@ -150,3 +150,20 @@ def test_realistic_flow_statistics_of_a_learned_flow_are_kept_per_weights_file(t
     a = tmp_path / "a.pt"
     a.write_bytes(b"one")
     assert _flow_dir(f"learned,weights={a},gate=0.7") == f"learned,weights={a},gate=0.7-{sha(a)}"
+
+
+def test_realistic_flow_runs_any_learned_spec_and_refuses_other_unknown_flows() -> None:
+    """``evaluate --learned SPEC``: a learned spec (not only the shipped default) builds the
+    learned back end with its options; a name that is neither a known flow nor a learned spec
+    is refused."""
+    from benchmarks.experiments.realistic_flow.evaluate import flow_for, is_learned
+    from cablesim.perception.flow import DISFlow
+    from cablesim.perception.learned import SHIPPED_WEIGHTS, LearnedFlow
+
+    est = flow_for("learned,weights=raft,gate=null", None)
+    assert isinstance(est, LearnedFlow)
+    assert est.weights == SHIPPED_WEIGHTS["raft"] and est.gate is None
+    assert isinstance(flow_for("dis-medium", None), DISFlow)
+    assert is_learned("learned,weights=raft") and not is_learned("dis-fine")
+    with pytest.raises(KeyError, match="unknown flow 'dis-coarse'"):
+        flow_for("dis-coarse", None)

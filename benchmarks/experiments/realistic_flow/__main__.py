@@ -37,6 +37,7 @@ from benchmarks.experiments.realistic_flow.evaluate import (
     ensure_stats,
     fp_near_hose,
     grade_proposals,
+    is_learned,
     load_target,
     score_row,
     stats_for,
@@ -56,6 +57,8 @@ from benchmarks.experiments.realistic_flow.record import (
 )
 from benchmarks.experiments.realistic_flow.report import ROWS
 from cablesim import provenance as pv
+from cablesim.errors import InputError
+from cablesim.perception.flow import make_flow
 
 # scene counts: what a shared 2-core machine allowed (one interaction ~45 s CPU to simulate)
 VAL_SEEDS, VAL_WANT, VAL_SOLID = range(300, 400), 12, 6
@@ -101,7 +104,8 @@ AFTER = ("dis-fine-vr1", "arm+normal", "fg-c3")
 # distance 15: the best of 10-21 on the validation scenes; thresholds tuned without it)
 COLOUR = (*AFTER, 15.0)
 ORACLE = ("oracle", "raw", "none")
-# ``--learned``: the after configuration with the shipped learned flow in place of DIS fine
+# ``--learned [SPEC]``: the after configuration with a learned flow (the shipped default, or
+# any spec of the learned back end, e.g. ``learned,weights=raft``) in place of DIS fine
 LEARNED_FLOW = "learned"
 METHODS = ("correlation", "segmentation", "ablation")
 
@@ -295,9 +299,13 @@ def main() -> None:
     )
     e.add_argument(
         "--learned",
-        action="store_true",
-        help="add the row 'learned': the after configuration with the shipped learned flow "
-        "(torch) in place of its flow",
+        nargs="?",
+        const=LEARNED_FLOW,
+        default=None,
+        metavar="SPEC",
+        help="add the row 'learned': the after configuration with a learned flow (torch) in "
+        f"place of its flow: the shipped default ({LEARNED_FLOW}) or the SPEC given, e.g. "
+        "learned,weights=raft",
     )
     _add_kind_args(e)
     e.add_argument(
@@ -339,6 +347,13 @@ def main() -> None:
             f"--after {args.after!r}: FLOW/SAMPLE/SUPPORT with FLOW one of {sorted(FLOWS)}, "
             f"SAMPLE one of {sorted(SAMPLES)} and SUPPORT one of {sorted(SUPPORTS)}"
         )
+    if args.learned is not None:
+        try:  # a bad spec or weights file stops here, before any statistics
+            if not is_learned(args.learned):
+                raise InputError("it names another back end than 'learned'")
+            make_flow(args.learned)
+        except InputError as err:
+            ap.error(f"--learned {args.learned!r}: {err}")
     colour = (*after, COLOUR[3])
     t_start = time.time()
     load0 = os.getloadavg()
@@ -383,8 +398,8 @@ def main() -> None:
         "oracle": ORACLE,
     }
     combos["oracle+support"] = ("oracle", "arm", after[2])
-    if args.learned:
-        combos["learned"] = (LEARNED_FLOW, *after[1:])
+    if args.learned is not None:
+        combos["learned"] = (args.learned, *after[1:])
         report["learned"] = list(combos["learned"])
     timings = {}
     noises = (True,) if args.noisy_only else (True, False)

@@ -35,7 +35,7 @@ from cablesim.perception.correlation import (
     CorrelationParams,
     CorrelationResult,
 )
-from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow
+from cablesim.perception.flow import DISFlow, FlowEstimator, OracleFlow, make_flow
 from cablesim.perception.flow_region import FlowRegion, RegionFlow
 from cablesim.perception.learned import LearnedFlow, weights_path
 from cablesim.perception.methods import make_method
@@ -199,6 +199,23 @@ FLOWS: dict[str, Callable[[LeanStream], FlowEstimator]] = {
     # the shipped learned flow (issue 23): DIS medium gated by the network's moving probability
     "learned": lambda s: LearnedFlow(),
 }
+
+
+def is_learned(flow: str) -> bool:
+    """Whether ``flow`` is a spec of the learned back end (``learned,weights=raft,...``)."""
+    return parse_spec(flow, "flow").target == "learned"
+
+
+def flow_for(flow: str, lean: LeanStream) -> FlowEstimator:
+    """The estimator of ``flow``: a name of :data:`FLOWS`, or any spec of the learned back
+    end (``learned,weights=raft,gate=null``: the options of
+    :class:`cablesim.perception.learned.LearnedFlow`)."""
+    if flow in FLOWS:
+        return FLOWS[flow](lean)
+    if is_learned(flow):
+        return make_flow(flow)
+    raise KeyError(f"unknown flow {flow!r}: one of {sorted(FLOWS)} or a learned flow spec")
+
 
 SAMPLES: dict[str, RefineParams] = {
     "raw": RefineParams(arm_masks=False),
@@ -413,7 +430,7 @@ def ensure_stats(
             )
         for f, ss in todo.items():
             tm = Timing()
-            est = FLOWS[f](lean)
+            est = flow_for(f, lean)
             stats = compute_variants(lean, est, ss, tm)
             for s, st in stats.items():
                 save_stats(_stats_path(sc, noisy, f, s), st)

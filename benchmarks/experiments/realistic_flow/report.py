@@ -120,8 +120,9 @@ def render(rep: dict[str, Any]) -> str:
         )
         + (
             f"; **learned** = {_combo(rep['learned'])}: the after configuration with the "
-            "shipped learned flow (`cablesim.perception.learned.LearnedFlow()`) in place of its "
-            "flow, thresholds tuned on validation like every row"
+            f"learned flow `{rep['learned'][0]}` (`cablesim.perception.learned.LearnedFlow`; "
+            "`learned` alone is the shipped default) in place of its flow, thresholds tuned "
+            "on validation like every row"
             if "learned" in rep
             else ""
         ),
