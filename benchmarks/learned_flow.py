@@ -17,7 +17,9 @@ Each back end is scored with the published MovingCables protocol
 (:func:`cablesim.formats.movingcables.evaluate_clip`: flow from each image to the first, the
 arm -- the clip's "stick" -- never moving, moving where |flow| > 1 px, truth the exact normal
 flow as published and the exact flow), pooled per split folder: IoU, precision, recall, EPE
-over all pixels and over the pixels whose true flow exceeds 1 px.  The speed section times
+over all pixels and over the pixels whose true flow exceeds 1 px; per clip (with the arm's
+largest share of the view) and pooled per kind of the cable that moves (from the clips' job
+records, :func:`clip_kinds`).  The speed section times
 one flow at 552x408 (the thesis's crop, scaled 1.5x) on one thread: thread CPU time, median of
 ``--repeats`` after a warm-up.
 
@@ -27,6 +29,7 @@ Writes ``benchmarks/results/learned_flow.md`` with ``--write``.
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import time
 from pathlib import Path
@@ -36,6 +39,7 @@ import numpy as np
 
 from benchmarks import RESULTS, write_results
 from cablesim import provenance as pv
+from cablesim.dataset.generate import scene_from
 from cablesim.formats.movingcables import (
     arm_share,
     evaluate_clip,
@@ -58,23 +62,55 @@ def with_weights(spec: str, weights: str | None) -> str:
 
 
 def score(
-    splits: list[Path], flow: str | FlowEstimator, truth: str, per_clip: dict | None = None
+    splits: list[Path],
+    flow: str | FlowEstimator,
+    truth: str,
+    per_clip: dict | None = None,
+    kinds: dict[str, str] | None = None,
+    per_kind: dict | None = None,
 ) -> dict[str, dict[str, float]]:
     """Per split folder (and ``all``): the pooled MovingCables summary of ``flow``; each
-    clip's own summary goes into ``per_clip`` (keyed ``folder/split/clip``) when given."""
+    clip's own summary goes into ``per_clip`` (keyed ``folder/split/clip``) when given, and
+    with ``kinds`` (clip -> the kind of the cable that moves in it, :func:`clip_kinds`) the
+    summary pooled over each kind's clips into ``per_kind``."""
     est = make_flow(flow) if isinstance(flow, str) else flow
     out: dict[str, dict[str, float]] = {}
     every = []
+    by_kind: dict[str, list] = {}
     for split in splits:
         frames = []
         for clip in list_clips(split):
             stats, _ = evaluate_clip(split, clip, est, 1.0, truth=truth)
             frames.extend(stats[1:])  # the first image is its own reference
+            key = f"{_name(split)}/{clip}"
             if per_clip is not None:
-                per_clip[f"{_name(split)}/{clip}"] = movingcables_summary(stats[1:]).to_dict()
+                per_clip[key] = movingcables_summary(stats[1:]).to_dict()
+            if kinds is not None:
+                by_kind.setdefault(kinds[key], []).extend(stats[1:])
         every.extend(frames)
         out[_name(split)] = movingcables_summary(frames).to_dict()
     out["all"] = movingcables_summary(every).to_dict()
+    if per_kind is not None:
+        per_kind.update({k: movingcables_summary(v).to_dict() for k, v in sorted(by_kind.items())})
+    return out
+
+
+def clip_kinds(splits: list[Path]) -> dict[str, str] | None:
+    """Per clip (``folder/split/clip``): the kind of the cable that moves in it, from the
+    clip's job record (``folder/jobs/movingcables-SPLIT-CLIP-sSEED.json``, written by
+    ``cablesim dataset movingcables``): the scene its seed and randomisation make
+    (:func:`cablesim.dataset.generate.scene_from`), cable ``hose``.  None when a clip has no
+    single record (clips made elsewhere)."""
+    out = {}
+    for split in splits:
+        jobs = split.parent / "jobs"
+        for clip in list_clips(split):
+            found = sorted(jobs.glob(f"movingcables-{split.name}-{clip}-s*.json"))
+            if len(found) != 1:
+                return None
+            rec = json.loads(found[0].read_text())
+            scene = scene_from(rec["params"])
+            out[f"{_name(split)}/{clip}"] = scene.hoses.kind_of(int(rec["result"]["hose"]))
     return out
 
 
@@ -102,6 +138,27 @@ def clip_table(
     for clip, share in shares.items():
         cells = [f"{per_clip[f][clip]['epe_gt_gt1']:.2f}" for f in flows]
         lines.append(f"| {clip} | {share:.2f} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def kind_table(
+    per_kind: dict[str, dict[str, dict[str, float]]], kinds: dict[str, str]
+) -> list[str]:
+    """Markdown rows: per kind of the moving cable and back end, the pooled IoU and EPE."""
+    clips: dict[str, int] = {}
+    for k in kinds.values():
+        clips[k] = clips.get(k, 0) + 1
+    lines = [
+        "| kind of the moving cable | clips | back end | IoU | P | R | EPE > 1 px | images |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for kind in sorted(clips):
+        for flow, by in per_kind.items():
+            s = by[kind]
+            lines.append(
+                f"| {kind} | {clips[kind]} | {flow} | {s['iou']:.3f} | {s['precision']:.3f} | "
+                f"{s['recall']:.3f} | {s['epe_gt_gt1']:.2f} | {s['images']} |"
+            )
     return lines
 
 
@@ -150,6 +207,8 @@ def report(
     weights: str,
     what: str = "held-out simulated clips",
     per_clip: dict[str, dict[str, dict[str, float]]] | None = None,
+    per_kind: dict[str, dict[str, dict[str, float]]] | None = None,
+    kinds: dict[str, str] | None = None,
 ) -> str:
     lines = [
         f"# The learned flow on {what} (`python -m benchmarks.learned_flow`)",
@@ -187,6 +246,17 @@ def report(
             "hose pixels are left, and they lie beside its large motion.",
             "",
             *clip_table(per_clip, arm_shares(splits)),
+            "",
+        ]
+    if per_kind and kinds:
+        lines += [
+            "## Per cable kind: the clips pooled by the kind of the cable that moves",
+            "",
+            "Against the exact normal flow. Each clip moves one cable; the scene draws every "
+            "cable's kind (and pattern) from its seed, so the other cables in view are of any "
+            "kind.",
+            "",
+            *kind_table(per_kind, kinds),
             "",
         ]
     if speeds:
@@ -230,11 +300,17 @@ def main(argv: list[str] | None = None) -> int:
     flows = {f: with_weights(f, args.weights) for f in args.flow}
     results: dict[str, dict[str, dict[str, dict[str, float]]]] = {}
     per_clip: dict[str, dict[str, dict[str, float]]] = {}
+    per_kind: dict[str, dict[str, dict[str, float]]] = {}
+    kinds = clip_kinds(args.data)
+    if kinds is None:
+        print("no job records beside the clips: no table per cable kind", flush=True)
     for truth in args.truth:
         results[truth] = {}
         for f, spec in flows.items():
-            clips = per_clip.setdefault(f, {}) if truth == "normal_flow" else None
-            results[truth][f] = score(args.data, spec, truth, clips)
+            normal = truth == "normal_flow"
+            clips = per_clip.setdefault(f, {}) if normal else None
+            by_kind = per_kind.setdefault(f, {}) if normal and kinds else None
+            results[truth][f] = score(args.data, spec, truth, clips, kinds, by_kind)
             a = results[truth][f]["all"]
             print(
                 f"{truth:11s} {f:40s} IoU {a['iou']:.3f} P {a['precision']:.3f} "
@@ -253,6 +329,8 @@ def main(argv: list[str] | None = None) -> int:
         args.weights or "as each row names it; rows without weights= run the shipped default",
         what,
         per_clip,
+        per_kind,
+        kinds,
     )
     if args.write:
         name = "learned_flow_validation.md" if args.validation else "learned_flow.md"

@@ -1,7 +1,7 @@
 """The tables two benchmarks compute, on hand-worked cases: the flow error by how far pixels
 moved (``benchmarks.flow_by_motion``) and where an explore run's wall time went
 (``benchmarks.bench_explore``), and the learned flow's per-clip table with the arm's share of
-the view (``benchmarks.learned_flow``)."""
+the view and its tables per cable kind (``benchmarks.learned_flow``)."""
 
 from __future__ import annotations
 
@@ -13,8 +13,9 @@ import pytest
 
 from benchmarks.bench_explore import STAGES, stages
 from benchmarks.flow_by_motion import Tally
-from benchmarks.learned_flow import arm_shares, clip_table
+from benchmarks.learned_flow import arm_shares, clip_kinds, clip_table, kind_table, score
 from cablesim.formats.movingcables import ClipFrame, write_clip
+from cablesim.perception.flow import FlowEstimator
 
 
 def _field(shape: tuple[int, int], u: np.ndarray) -> np.ndarray:
@@ -107,3 +108,54 @@ def test_the_per_clip_table_gives_each_clip_its_arm_share_and_errors(tmp_path: P
         "| lf/test/0001 | 0.10 | 1.23 | 0.50 |",
         "| lf/test/0002 | 0.75 | 36.60 | 40.00 |",
     ]
+
+
+class _Still(FlowEstimator):
+    """No motion anywhere: the error is the true flow's length."""
+
+    name = "still"
+
+    def compute(self, image1: np.ndarray, image2: np.ndarray) -> np.ndarray:
+        return np.zeros((*image1.shape[:2], 2), np.float32)
+
+
+def test_clips_are_pooled_by_the_kind_of_the_cable_that_moves(tmp_path: Path) -> None:
+    # three clips: two move a rope (2 px and 4 px on 4 pixels each), one a thin wire (6 px)
+    split = tmp_path / "lf" / "test"
+    rgb = np.zeros((4, 5, 3), np.uint8)
+    inst = np.zeros((4, 5), np.uint16)
+    no_stick = np.zeros((4, 5), bool)
+    for clip, px, kind, seed in (
+        ("0001", 2.0, "rope", 7),
+        ("0002", 4.0, "rope", 8),
+        ("0003", 6.0, "thin_wire", 9),
+    ):
+        moved = np.zeros((4, 5, 2), np.float32)
+        moved[0, :4, 0] = px
+        still = np.zeros_like(moved)
+        frames = [
+            ClipFrame(1, rgb, still, still, inst, no_stick),
+            ClipFrame(3, rgb, moved, moved, inst, no_stick),
+        ]
+        write_clip(split, clip, frames)
+        jobs = tmp_path / "lf" / "jobs"
+        jobs.mkdir(exist_ok=True)
+        record = {
+            "params": {"seed": seed, "scene": {"cable": kind}, "randomize": {}},
+            "result": {"hose": 1},
+        }
+        (jobs / f"movingcables-test-{clip}-s{seed}.json").write_text(json.dumps(record))
+    kinds = clip_kinds([split])
+    assert kinds == {"lf/test/0001": "rope", "lf/test/0002": "rope", "lf/test/0003": "thin_wire"}
+    per_kind: dict = {}
+    out = score([split], _Still(), "normal_flow", kinds=kinds, per_kind=per_kind)
+    assert per_kind["rope"]["epe_gt_gt1"] == pytest.approx(3.0)  # (4 * 2 + 4 * 4) / 8
+    assert per_kind["thin_wire"]["epe_gt_gt1"] == pytest.approx(6.0)
+    assert out["all"]["epe_gt_gt1"] == pytest.approx(4.0)
+    assert per_kind["rope"]["images"] == 2 and per_kind["thin_wire"]["images"] == 1
+    rows = kind_table({"still": per_kind}, kinds)
+    assert rows[2].startswith("| rope | 2 | still | 0.000 |") and rows[2].endswith("| 3.00 | 2 |")
+    assert rows[3].startswith("| thin_wire | 1 | still |")
+    # a clip without its job record: no kinds rather than a wrong one
+    next((tmp_path / "lf" / "jobs").glob("*-0003-*")).unlink()
+    assert clip_kinds([split]) is None
