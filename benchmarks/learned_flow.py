@@ -29,9 +29,9 @@ Writes ``benchmarks/results/learned_flow.md`` with ``--write``.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
+from collections import Counter
 from pathlib import Path
 
 import cv2
@@ -46,6 +46,7 @@ from cablesim.formats.movingcables import (
     list_clips,
     read_stick_masks,
 )
+from cablesim.jobs import read_result
 from cablesim.perception.flow import FlowEstimator, make_flow
 from cablesim.perception.metrics import movingcables_summary
 
@@ -100,15 +101,15 @@ def clip_kinds(splits: list[Path]) -> dict[str, str] | None:
     clip's job record (``folder/jobs/movingcables-SPLIT-CLIP-sSEED.json``, written by
     ``cablesim dataset movingcables``): the scene its seed and randomisation make
     (:func:`cablesim.dataset.generate.scene_from`), cable ``hose``.  None when a clip has no
-    single record (clips made elsewhere)."""
+    single readable record (clips made elsewhere)."""
     out = {}
     for split in splits:
         jobs = split.parent / "jobs"
         for clip in list_clips(split):
             found = sorted(jobs.glob(f"movingcables-{split.name}-{clip}-s*.json"))
-            if len(found) != 1:
+            rec = read_result(found[0]) if len(found) == 1 else None
+            if rec is None:
                 return None
-            rec = json.loads(found[0].read_text())
             scene = scene_from(rec["params"])
             out[f"{_name(split)}/{clip}"] = scene.hoses.kind_of(int(rec["result"]["hose"]))
     return out
@@ -145,9 +146,7 @@ def kind_table(
     per_kind: dict[str, dict[str, dict[str, float]]], kinds: dict[str, str]
 ) -> list[str]:
     """Markdown rows: per kind of the moving cable and back end, the pooled IoU and EPE."""
-    clips: dict[str, int] = {}
-    for k in kinds.values():
-        clips[k] = clips.get(k, 0) + 1
+    clips = Counter(kinds.values())
     lines = [
         "| kind of the moving cable | clips | back end | IoU | P | R | EPE > 1 px | images |",
         "|---|---|---|---|---|---|---|---|",

@@ -141,6 +141,7 @@ def test_clips_are_pooled_by_the_kind_of_the_cable_that_moves(tmp_path: Path) ->
         jobs = tmp_path / "lf" / "jobs"
         jobs.mkdir(exist_ok=True)
         record = {
+            "status": "ok",
             "params": {"seed": seed, "scene": {"cable": kind}, "randomize": {}},
             "result": {"hose": 1},
         }
