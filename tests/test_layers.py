@@ -9,9 +9,10 @@ those inside functions alike:
   cablesim above it, and neither MuJoCo nor any other heavy package: every layer may use it;
 - ``perception``, ``formats`` and ``camera``: neither the simulator (``cablesim.sim``, MuJoCo)
   nor any layer above them (``episode``, ``policies``, ``envs``);
-- ``robot``: nothing of the simulator, ``episode``, ``policies`` or ``envs`` (the real arm
-  reads the Panda's description in ``cablesim.panda``, whose arm-only kinematics model uses
-  MuJoCo as a geometry library, never ``cablesim.sim``);
+- ``robot``: nothing of the simulator (``cablesim.sim``, ``cablesim.twin``, MuJoCo itself),
+  ``episode``, ``policies`` or ``envs`` (the real arm reads the Panda's description in
+  ``cablesim.panda``, whose arm-only kinematics model uses MuJoCo as a geometry library: only
+  ``panda`` imports MuJoCo directly);
 - ``perception``, ``camera`` and ``robot`` (with ``panda``, the Panda's description beneath
   it) import the ground floor, never each other;
 - ``episode`` (the interaction runner shared by the simulated and the real robot): nothing of
@@ -62,6 +63,9 @@ RULES = {
     "cablesim.panda": SIM + ABOVE + PERCEPTION + CAMERA + ("cablesim.robot",),
     "cablesim.episode": SIM + ("cablesim.policies", "cablesim.envs"),
 }
+# what a layer must not import itself though a layer beneath it may load it: the robot layer
+# reaches MuJoCo only through cablesim.panda (the arm model's kinematics, mink)
+DIRECT_RULES = {"cablesim.robot": ("mujoco", "mink")}
 # third-party packages the ground floor must not load (it is imported by every layer)
 GROUND_FORBIDDEN_THIRD_PARTY = ("mujoco", "mink", "cv2", "scipy", "torch", "ray", "matplotlib")
 
@@ -177,6 +181,9 @@ def violations(imports: list[Import]) -> list[str]:
                 hit = [c for c in imp.candidates if _within(c, forbidden)]
                 if hit:
                     bad.append(f"{where}: {layer} must not import {hit[0]}")
+        for layer, forbidden in DIRECT_RULES.items():
+            if _within(imp.module, (layer,)) and _within(imp.target, forbidden):
+                bad.append(f"{where}: {layer} must not import {top} itself")
         if _within(imp.module, GROUND):
             above = [c for c in imp.candidates if c.startswith("cablesim.")]
             if top == "cablesim" and not all(_within(c, GROUND) for c in above):
@@ -222,6 +229,8 @@ def test_checker_fails_on_a_function_level_import_across_a_seam(tmp_path: Path) 
             "perception/other.py": "def f():\n    from ..sim.truth import SimTruth\n",
             "frames.py": "from cablesim.perception import flow\n",
             "pose.py": "from cablesim import gl\n",
+            "robot/__init__.py": "",
+            "robot/arm.py": "import numpy\nimport mujoco\nfrom cablesim.panda import ik\n",
         },
     )
     bad = violations(collect_imports(root, {"cablesim": "cablesim"}))
@@ -234,6 +243,9 @@ def test_checker_fails_on_a_function_level_import_across_a_seam(tmp_path: Path) 
     assert any("perception/other.py:2" in b and "cablesim.sim.truth" in b for b in bad), bad
     assert any("frames.py:1" in b and "ground floor" in b for b in bad), bad
     assert any("pose.py:1" in b and "ground floor" in b for b in bad), bad
+    # the robot layer reaches MuJoCo only through cablesim.panda, never by itself
+    assert any("robot/arm.py:2" in b and "must not import mujoco itself" in b for b in bad), bad
+    assert not any("robot/arm.py:1" in b or "robot/arm.py:3" in b for b in bad), bad
 
 
 def test_checker_reports_an_unmarked_lazy_import(tmp_path: Path) -> None:

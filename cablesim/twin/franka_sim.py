@@ -10,7 +10,7 @@ subprocess from its own environment: the Python named by ``$CABLESIM_FRANKA_SIM_
 interpreter if it can import ``franka_sim``.  The server is bound to 127.0.0.1 only (its command
 line binds all interfaces, so it is started from Python) and exits on its own after
 ``lifetime`` seconds whatever happens to this process.  Its arm model is
-:func:`~cablesim.robot.franky_panda.franka_sim_mjcf` (our Panda); its gripper is franka-sim's
+:func:`~cablesim.twin.franka_sim_model.franka_sim_mjcf` (our Panda); its gripper is franka-sim's
 kinematic hand with a virtual object of ``object_width`` between the fingers (a grasp stops
 there and reports success).
 
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from cablesim.errors import CablesimError, InputError
-from cablesim.robot.franky_panda import franka_sim_mjcf
+from cablesim.twin.franka_sim_model import franka_sim_mjcf
 
 
 def _loopback_host() -> str:
@@ -154,7 +154,7 @@ else:
 #: clock, dropping steps when the host is slow, so the states a client saw depended on the
 #: load; in lockstep it steps exactly once (1 ms) per state cycle, and the arm's motion is the
 #: same whatever the load.  (Where a finished motion ends is the servo's stability on the
-#: model, not the clock: see ``FRANKA_SIM_ARMATURE`` in :mod:`cablesim.robot.franky_panda`.)
+#: model, not the clock: see ``FRANKA_SIM_ARMATURE`` in :mod:`cablesim.twin.franka_sim_model`.)
 #: Nothing else changes: every motion limit is still checked on every command, and a client
 #: that stops answering for longer than the wait still loses cycles (20 in a row abort the
 #: motion with ``communication_constraints_violation``).  Where franka-sim's internals differ,

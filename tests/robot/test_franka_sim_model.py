@@ -15,7 +15,7 @@ import numpy as np
 import scipy.linalg
 
 from cablesim.panda import HOME_QPOS, JOINT_LIMITS
-from cablesim.robot.franky_panda import franka_sim_mjcf
+from cablesim.twin.franka_sim_model import franka_sim_mjcf
 
 #: franka-sim 1.1.7's ``ARM_POSITION_KD`` (= ``ARM_VELOCITY_KV``), Nm s/rad, and its step (s)
 KD = np.array([450.0, 450.0, 350.0, 350.0, 200.0, 200.0, 200.0])

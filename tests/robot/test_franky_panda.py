@@ -31,7 +31,7 @@ from cablesim.panda import HOME_QPOS, JOINT_LIMITS
 from cablesim.panda.ik import ArmModel
 from cablesim.panda.model import panda_spec
 from cablesim.robot.base import MoveResult
-from cablesim.robot.franky_panda import FLANGE_T_TCP, FrankyPanda, franka_sim_mjcf
+from cablesim.robot.franky_panda import FLANGE_T_TCP, FrankyPanda
 from cablesim.twin.franka_sim import (
     HOST,
     CycleViolation,
@@ -39,6 +39,7 @@ from cablesim.twin.franka_sim import (
     FrankaSimUnavailable,
     parse_cycle_violations,
 )
+from cablesim.twin.franka_sim_model import franka_sim_mjcf
 
 OBJECT_WIDTH = 0.02  # m: the server's virtual object between the fingers
 SERVER_LIFETIME = 300.0  # s: the server exits on its own after this, whatever happens here
