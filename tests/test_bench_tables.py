@@ -1,7 +1,8 @@
 """The tables two benchmarks compute, on hand-worked cases: the flow error by how far pixels
 moved (``benchmarks.flow_by_motion``) and where an explore run's wall time went
 (``benchmarks.bench_explore``), and the learned flow's per-clip table with the arm's share of
-the view and its tables per cable kind (``benchmarks.learned_flow``)."""
+the view and its tables per cable kind (``benchmarks.learned_flow``), and how much motion a
+back end reports on a real clip's moving cable (``benchmarks.real_clip_motion``)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import pytest
 from benchmarks.bench_explore import STAGES, stages
 from benchmarks.flow_by_motion import Tally
 from benchmarks.learned_flow import arm_shares, clip_kinds, clip_table, kind_table, score
+from benchmarks.real_clip_motion import Motion, motion_on_truth, report
 from cablesim.formats.movingcables import ClipFrame, write_clip
 from cablesim.perception.flow import FlowEstimator
 
@@ -160,3 +162,32 @@ def test_clips_are_pooled_by_the_kind_of_the_cable_that_moves(tmp_path: Path) ->
     # a clip without its job record: no kinds rather than a wrong one
     next((tmp_path / "lf" / "jobs").glob("*-0003-*")).unlink()
     assert clip_kinds([split]) is None
+
+
+def test_motion_on_the_true_pixels_leaves_out_the_stick_and_still_frames() -> None:
+    # 3 frames of 2x3 px: frame 0 has no true moving pixel (skipped); in frame 1 the truth is
+    # the top row, |flow| 0.5, 2, 4 there, and the stick covers its last pixel; in frame 2 the
+    # truth is every pixel, |flow| 0 on the top row and 3 below
+    mags = np.zeros((3, 2, 3), np.float32)
+    mags[1, 0] = (0.5, 2.0, 4.0)
+    mags[2, 1] = 3.0
+    truth = np.zeros((3, 2, 3), bool)
+    truth[1, 0] = True
+    truth[2] = True
+    stick = np.zeros((3, 2, 3), bool)
+    stick[1, 0, 2] = True
+    mo = motion_on_truth(mags, truth, stick)
+    assert mo.frames == (1, 2)
+    assert mo.median == (1.25, 1.5)  # of (0.5, 2) and of (0, 0, 0, 3, 3, 3)
+    assert mo.found == (0.5, 0.5)
+    assert mo.summary() == (1.375, 0.5)
+    # without the stick frame 1 keeps its 4 px pixel
+    assert motion_on_truth(mags, truth).median == (2.0, 1.5)
+    table = report(
+        {"dis": {"0003": mo}, "raft": {"0003": Motion((1,), (0.6875,), (0.25,))}}, ["0003"]
+    )
+    rows = [r for r in table.splitlines() if r.startswith("| `")]
+    assert rows == [
+        "| `dis` | 0003 | 2 | 1.38 | 1.00 | 0.50 |",
+        "| `raft` | 0003 | 1 | 0.69 | 0.50 | 0.25 |",
+    ]
