@@ -34,6 +34,7 @@ STREAMS: tuple[str, ...] = (
     "dataset_kinds",  # a dataset scene's cable kinds, one per cable
     "dataset_patterns",  # a dataset scene's cable surface patterns, one per cable
     "dataset_motion",  # a MovingCables clip's action direction and amplitude
+    "dataset_same_colour",  # whether a dataset scene's cables all wear one colour
 )
 
 

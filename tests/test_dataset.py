@@ -55,6 +55,39 @@ def test_randomised_scenes_depend_on_the_seed_only():
         Randomization(backgrounds=("lava",))
 
 
+def test_same_coloured_scenes_are_the_same_scenes_in_one_colour():
+    from cablesim.dataset.generate import scene_from
+    from cablesim.sim.layout import sample_hoses
+
+    base = SceneConfig()
+    plain = [randomize_scene(s, base) for s in range(40)]
+    half = [randomize_scene(s, base, Randomization(same_colour=0.5)) for s in range(40)]
+    flagged = [h.hoses.same_colour for h in half]
+    assert 10 <= sum(flagged) <= 30  # about half, drawn per seed
+    assert not any(p.hoses.same_colour for p in plain)
+    for p, h in zip(plain, half, strict=True):  # everything else drawn as without it
+        assert p.to_dict() == h.replace(hoses=h.hoses.replace(same_colour=False)).to_dict()
+    # a flagged scene lays out the same cables, all in the first cable's colour (within the
+    # kinds' jitter); the default keeps distinct colours
+    seed = flagged.index(True)
+    one, many = sample_hoses(half[seed]), sample_hoses(plain[seed])
+    assert [(c.ends, c.length, c.young) for c in one] == [(c.ends, c.length, c.young) for c in many]
+    assert one[0].rgb == many[0].rgb
+    jitter = max(half[seed].hoses.cable(i).color_jitter for i in range(len(one)))
+    assert all(np.abs(np.subtract(c.rgb, one[0].rgb)).max() <= 2 * jitter + 1e-9 for c in one)
+    assert max(np.abs(np.subtract(c.rgb, many[0].rgb)).max() for c in many) > 2 * jitter
+    # the dataset's jobs carry the share only where it is asked for, and their scenes use it
+    jobs = dataset_jobs("movingcables", seed, seed + 1, Path("x"), "test", TINY, same_colour=0.5)
+    assert jobs[0].params["randomize"]["same_colour"] == 0.5
+    assert scene_from(jobs[0].params).hoses.same_colour
+    plain_job = dataset_jobs("movingcables", seed, seed + 1, Path("x"), "test", TINY)[0]
+    assert "same_colour" not in plain_job.params["randomize"]
+    with pytest.raises(ConfigError, match="--same-colour: the share must be in"):
+        dataset_jobs("movingcables", 0, 1, Path("x"), "test", TINY, same_colour=1.5)
+    with pytest.raises(ConfigError, match="same_colour"):
+        Randomization(same_colour=-0.1)
+
+
 def test_a_clips_hand_motion_is_drawn_from_its_seed():
     from cablesim.dataset.generate import clip_motion
 

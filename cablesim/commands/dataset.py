@@ -71,6 +71,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="movingcables: the hand's amplitude in metres, uniform in [LO, HI] per clip "
         "(default 0.02 0.05)",
     )
+    p.add_argument(
+        "--same-colour",
+        type=float,
+        default=0.0,
+        metavar="SHARE",
+        help="the share of scenes whose cables all wear one colour, a tangle of identical "
+        "cables (default 0; each scene draws it from its seed)",
+    )
     p.add_argument("--quiet", action="store_true")
 
 
@@ -86,14 +94,18 @@ def dataset_jobs(
     cable_patterns: tuple[str, ...] = tuple(PATTERNS),
     directions: tuple[str, ...] = CLIP_DIRECTIONS,
     amplitude: tuple[float, float] = CLIP_AMPLITUDE,
+    same_colour: float = 0.0,
 ) -> list:
     """One job per seed; each scene randomised, its cables' kinds drawn from ``cable_kinds``
-    and their patterns from ``cable_patterns`` (empty: each cable its kind's); a MovingCables
-    clip's hand moves in one of ``directions`` by an amplitude drawn in ``amplitude`` (m)."""
+    and their patterns from ``cable_patterns`` (empty: each cable its kind's), a share
+    ``same_colour`` of the scenes with all cables of one colour; a MovingCables clip's hand
+    moves in one of ``directions`` by an amplitude drawn in ``amplitude`` (m)."""
 
     if layout == "mcor" and split == "train":
         raise ConfigError("--split", "the motion-correlation annotations have validation and test")
     motion = check_motion(directions, amplitude) if layout == "movingcables" else None
+    if not 0 <= same_colour <= 1:
+        raise ConfigError("--same-colour", f"the share must be in [0, 1], got {same_colour}")
     jobs = []
     for seed in range(first, stop):
         params = {
@@ -104,6 +116,8 @@ def dataset_jobs(
             "randomize": {
                 "cable_kinds": list(cable_kinds),
                 "cable_patterns": list(cable_patterns),
+                # (the jobs of datasets made without it as before)
+                **({"same_colour": float(same_colour)} if same_colour else {}),
             },
             "periods": periods if periods is not None else (1 if layout == "movingcables" else 3),
         }
@@ -178,6 +192,7 @@ def run(args: argparse.Namespace) -> int:
         patterns,
         tuple(args.directions),
         tuple(args.amplitude),
+        args.same_colour,
     )
     with OutputLock(args.out):  # refused at once while another command writes there
         check_finished(jobs, args.out / "jobs")

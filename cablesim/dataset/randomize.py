@@ -1,7 +1,7 @@
 """Randomised scenes for datasets: background, hose count and colours, lighting and camera pose
-drawn from the seed's ``dataset`` stream, the cable kinds from its ``dataset_kinds`` stream and
-the cables' surface patterns from its ``dataset_patterns`` stream (so a scene depends on its
-seed alone).
+drawn from the seed's ``dataset`` stream, the cable kinds from its ``dataset_kinds`` stream,
+the cables' surface patterns from its ``dataset_patterns`` stream and whether they all wear one
+colour from its ``dataset_same_colour`` stream (so a scene depends on its seed alone).
 
     scene = randomize_scene(1234, SceneConfig(), Randomization())
 """
@@ -25,6 +25,9 @@ class Randomization(Config):
     backgrounds: tuple[str, ...] = BACKGROUNDS
     hoses: tuple[int, int] = (2, 6)  # inclusive range of hose counts
     random_colours: float = 0.5  # share of scenes with random (HSV) hose colours
+    # share of scenes whose cables all wear one colour (``hoses.same_colour``): a tangle of
+    # identical cables; 0 keeps the scenes of datasets made before it
+    same_colour: float = 0.0
     light_jitter: float = 0.3  # LightConfig.jitter
     camera_position_jitter: float = 0.02  # metres, CameraConfig.position_jitter
     camera_look_at_jitter: float = 0.03
@@ -48,6 +51,8 @@ class Randomization(Config):
             raise ConfigError("hoses", f"need 1 <= min <= max <= 8, got {self.hoses}")
         if not 0 <= self.random_colours <= 1:
             raise ConfigError("random_colours", f"must be in [0, 1], got {self.random_colours}")
+        if not 0 <= self.same_colour <= 1:
+            raise ConfigError("same_colour", f"must be in [0, 1], got {self.same_colour}")
         check_positive("light_jitter", self.light_jitter, allow_zero=True)
         check_positive("camera_position_jitter", self.camera_position_jitter, allow_zero=True)
         check_positive("camera_look_at_jitter", self.camera_look_at_jitter, allow_zero=True)
@@ -92,6 +97,9 @@ def randomize_scene(seed: int, base: SceneConfig, r: Randomization | None = None
         count = int(values["hoses.count"])
         pick = stream(seed, "dataset_patterns").integers(len(patterns), size=count)
         values["hoses.patterns"] = tuple(patterns[int(k)] for k in pick)
+    # its own stream, as the kinds': the scene's other draws are those made without it
+    if r.same_colour > 0 and stream(seed, "dataset_same_colour").random() < r.same_colour:
+        values["hoses.same_colour"] = True
     values["light.jitter"] = float(r.light_jitter)
     values["camera.position_jitter"] = float(r.camera_position_jitter)
     values["camera.look_at_jitter"] = float(r.camera_look_at_jitter)

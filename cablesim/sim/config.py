@@ -251,6 +251,9 @@ class HoseConfig(Config):
     both_ends_probability: float = 0.75  # else attached at one end and hanging free
     colors: tuple[tuple[float, float, float], ...] | None = None
     color_jitter: float | None = None
+    # every cable wears the colour the first one draws (each still jittered by its kind's
+    # ``color_jitter``): a tangle of identical cables; the layout is drawn as without it
+    same_colour: bool = False
     friction: float | None = None
     # cross-section of the rod: "circle" of ``radius`` (default), or "box" of half-sizes
     # ``section_size`` (a flat ribbon), which MuJoCo draws in the rod's material frame, so its

@@ -124,8 +124,10 @@ def sample_hoses(cfg: SceneConfig) -> list[HoseSpec]:
             ends, bulge, floor = _place_on_board(
                 cfg, rng, free, float(lengths[i]), cable, rank, r_max, h.count - i - 1
             )
-        palette = cable.colors
-        base = np.array(palette[int(colour_order[i % len(colour_order)]) % len(palette)], float)
+        # ``same_colour``: the colour the first cable draws, whatever this one's kind
+        palette = cables[0].colors if h.same_colour else cable.colors
+        slot = 0 if h.same_colour else i % len(colour_order)
+        base = np.array(palette[int(colour_order[slot]) % len(palette)], float)
         jitter = cable.color_jitter
         rgb = np.clip(base + rng.uniform(-jitter, jitter, 3), 0, 1)
         n_vert = hose_vertex_count(float(lengths[i]), cable.segment_length)
