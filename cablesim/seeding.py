@@ -35,6 +35,7 @@ STREAMS: tuple[str, ...] = (
     "dataset_patterns",  # a dataset scene's cable surface patterns, one per cable
     "dataset_motion",  # a MovingCables clip's action direction and amplitude
     "dataset_same_colour",  # whether a dataset scene's cables all wear one colour
+    "dataset_h264",  # whether and how hard a MovingCables clip is H.264-compressed
 )
 
 

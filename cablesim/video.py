@@ -16,6 +16,7 @@ the same bytes.
 from __future__ import annotations
 
 import struct
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,8 @@ from typing import Any
 import cv2
 import imageio.v2 as imageio
 import numpy as np
+
+from cablesim.errors import RecordingError
 
 ENCODERS = ("h264", "mp4v")
 #: libx264's preset: ``veryfast`` encodes the README demo's 665 frames (640x480, crf 20) in
@@ -156,6 +159,56 @@ def _open_h264(path: Path, size: tuple[int, int], fps: float, crf: int) -> Any:
     except (OSError, RuntimeError):
         return None
     return sink
+
+
+def h264_roundtrip(frames: Sequence[np.ndarray], crf: int, fps: float = 15.0) -> list[np.ndarray]:
+    """``frames`` (RGB uint8, one size) as an H.264 video shows them: encoded by libx264
+    (yuv420p, ``crf``, :data:`PRESET`, one thread, so the same frames give the same result)
+    and decoded again.  Blocks, ringing, smeared chroma and motion-predicted frames, as the
+    published MovingCables videos have.  An odd last row or column keeps its pixels."""
+    if not frames:
+        return []
+    if not 0 <= int(crf) <= 51:
+        raise ValueError(f"crf must be in [0, 51], got {crf}")
+    h, w = frames[0].shape[:2]
+    size = (w - w % 2, h - h % 2)
+    if min(size) < 2:
+        raise ValueError(f"frames of {w}x{h} are too small for H.264")
+    try:
+        import imageio_ffmpeg  # lazy: optional heavy package
+    except ImportError as e:
+        raise RecordingError(f"H.264 needs the imageio-ffmpeg package: {e}") from None
+    with tempfile.TemporaryDirectory(prefix="cablesim-h264-") as tmp:
+        path = Path(tmp) / "clip.mp4"
+        sink = imageio_ffmpeg.write_frames(
+            str(path),
+            size,
+            fps=fps,
+            codec="libx264",
+            pix_fmt_in="rgb24",
+            pix_fmt_out="yuv420p",
+            quality=None,
+            macro_block_size=2,
+            ffmpeg_log_level="error",
+            output_params=["-crf", str(int(crf)), "-preset", PRESET, "-threads", "1"],
+        )
+        sink.send(None)
+        for f in frames:
+            if f.shape[:2] != (h, w):
+                raise ValueError(f"frames differ in size: {f.shape[:2]} against {(h, w)}")
+            sink.send(np.ascontiguousarray(f[: size[1], : size[0], :3], dtype=np.uint8).tobytes())
+        sink.close()
+        reader = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24")
+        next(reader)  # the stream's metadata
+        decoded = [np.frombuffer(b, np.uint8).reshape(size[1], size[0], 3).copy() for b in reader]
+    if len(decoded) != len(frames):
+        raise RecordingError(f"H.264 gave back {len(decoded)} of {len(frames)} frames")
+    out = []
+    for f, d in zip(frames, decoded, strict=True):
+        full = np.array(f[..., :3], dtype=np.uint8, copy=True)
+        full[: size[1], : size[0]] = d
+        out.append(full)
+    return out
 
 
 def count_video_frames(path: str | Path) -> int:

@@ -104,6 +104,36 @@ def test_a_clips_hand_motion_is_drawn_from_its_seed():
     assert "motion" not in dataset_jobs("mcor", 0, 1, Path("x"), "test", TINY)[0].params
 
 
+def test_h264_and_hose_counts_are_drawn_per_clip_and_checked():
+    from cablesim.dataset.generate import clip_h264, scene_from
+
+    compress = {"h264": 0.5, "crf": [20, 34]}
+    draws = [clip_h264(s, compress) for s in range(200)]
+    assert draws == [clip_h264(s, compress) for s in range(200)]  # the seed alone decides
+    crfs = [c for c in draws if c is not None]
+    assert 70 < len(crfs) < 130 and min(crfs) >= 20 and max(crfs) <= 34 and len(set(crfs)) > 8
+    assert clip_h264(3, None) is None and clip_h264(3, {"h264": 0.0, "crf": [20, 34]}) is None
+    assert all(clip_h264(s, {"h264": 1.0, "crf": [27, 27]}) == 27 for s in range(20))
+    # the jobs carry the settings only where asked for: older datasets' jobs stay as they were
+    plain = dataset_jobs("movingcables", 0, 1, Path("x"), "test", TINY)[0].params
+    assert "compress" not in plain and "hoses" not in plain["randomize"]
+    jobs = dataset_jobs("movingcables", 0, 30, Path("x"), "test", TINY, hoses=(7, 8), h264=0.5)
+    assert jobs[0].params["compress"] == compress
+    counts = {scene_from(j.params).hoses.count for j in jobs}
+    assert counts == {7, 8}
+    assert "compress" not in dataset_jobs("mcor", 0, 1, Path("x"), "test", TINY, h264=0.5)[0].params
+    with pytest.raises(ConfigError, match="--h264: the share must be in"):
+        dataset_jobs("movingcables", 0, 1, Path("x"), "test", TINY, h264=2.0)
+    with pytest.raises(ConfigError, match="--h264 crf: need 0 <= LO <= HI <= 51, got 30 60"):
+        dataset_jobs("movingcables", 0, 1, Path("x"), "test", TINY, h264=0.5, h264_crf=(30, 60))
+    with pytest.raises(ConfigError, match="--hoses: need 1 <= LO <= HI <= 8, got 3 9"):
+        dataset_jobs("movingcables", 0, 1, Path("x"), "test", TINY, hoses=(3, 9))
+    with pytest.raises(ConfigError, match="data.h264: the share"):
+        dataset_jobs(
+            "movingcables", 0, 1, Path("x"), "test", TINY, h264=-1, names={"h264": "data.h264"}
+        )
+
+
 def test_a_dataset_made_with_other_settings_is_not_added_to(tmp_path):
     from cablesim.commands.dataset import check_finished
     from cablesim.jobs import result_path

@@ -8,7 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from cablesim.video import VideoWriter, count_video_frames, video_codec
+from cablesim.video import VideoWriter, count_video_frames, h264_roundtrip, video_codec
 
 
 def _frames(n: int = 24, h: int = 121, w: int = 161) -> list[np.ndarray]:
@@ -72,3 +72,31 @@ def test_codec_of_other_files(tmp_path):
     assert video_codec(tmp_path / "junk.mp4") is None
     with pytest.raises(ValueError, match="encoders"):
         VideoWriter(tmp_path / "x.mp4", encoders=("divx",))
+
+
+def test_h264_roundtrip_degrades_like_a_video_and_repeats_itself():
+    """A smooth moving pattern comes back close but not equal (blocks, chroma), the same bytes
+    every time; a harder CRF loses more; an odd last row and column keep their pixels."""
+    yy, xx = np.mgrid[0:121, 0:161].astype(np.float32)
+    frames = []
+    for k in range(6):
+        g = 128 + 60 * np.sin((xx - 2 * k) / 5.0) * np.cos(yy / 7.0)
+        frames.append(np.dstack([g, 255 - g, np.full_like(g, 90)]).clip(0, 255).astype(np.uint8))
+    soft, again, hard = (h264_roundtrip(frames, c) for c in (18, 18, 40))
+    assert len(soft) == 6 and all(f.shape == (121, 161, 3) and f.dtype == np.uint8 for f in soft)
+    assert all(np.array_equal(a, b) for a, b in zip(soft, again, strict=True))
+
+    def err(out):
+        return np.mean(
+            [
+                np.abs(o[:120, :160].astype(int) - f[:120, :160]).mean()
+                for o, f in zip(out, frames, strict=True)
+            ]
+        )
+
+    assert 0 < err(soft) < 4.0 and err(hard) > 1.5 * err(soft)  # (3.1 and 6.9 when written)
+    assert np.array_equal(soft[2][120], frames[2][120]) and np.array_equal(
+        soft[2][:, 160], frames[2][:, 160]
+    )
+    with pytest.raises(ValueError, match="crf"):
+        h264_roundtrip(frames, 60)

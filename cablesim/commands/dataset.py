@@ -33,6 +33,7 @@ from cablesim.episode.config import DIRECTION_NAMES
 from cablesim.errors import ConfigError
 from cablesim.files import OutputLock, write_text
 from cablesim.jobs import Job, execute, load_results, parse_range, read_result, result_path
+from cablesim.sim.config import MAX_HOSES
 
 LAYOUTS = ("movingcables", "mcor")
 #: A MovingCables clip's hand motion: one direction drawn per clip, an amplitude (m) uniform in
@@ -40,6 +41,9 @@ LAYOUTS = ("movingcables", "mcor")
 #: the hose (the normal flow); pulling across moves the hose as the real clips' stick does.
 CLIP_DIRECTIONS: tuple[str, ...] = ("along", "across")
 CLIP_AMPLITUDE: tuple[float, float] = (0.02, 0.05)
+#: the CRF range of ``--h264`` clips: 20 (hardly visible) to 34 (blocks on the board's grain);
+#: libx264's default is 23
+CLIP_H264_CRF: tuple[int, int] = (20, 34)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -79,6 +83,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="the share of scenes whose cables all wear one colour, a tangle of identical "
         "cables (default 0; each scene draws it from its seed)",
     )
+    p.add_argument(
+        "--hoses",
+        nargs=2,
+        type=int,
+        default=None,
+        metavar=("LO", "HI"),
+        help=f"cables per scene, drawn in [LO, HI] (at most {MAX_HOSES}; default: the "
+        "randomiser's 2 6)",
+    )
+    p.add_argument(
+        "--h264",
+        type=float,
+        default=0.0,
+        metavar="SHARE",
+        help="movingcables: the share of clips whose images are seen through H.264, as the "
+        f"published videos are, at a CRF drawn per clip in {CLIP_H264_CRF} (default 0)",
+    )
     p.add_argument("--quiet", action="store_true")
 
 
@@ -95,17 +116,31 @@ def dataset_jobs(
     directions: tuple[str, ...] = CLIP_DIRECTIONS,
     amplitude: tuple[float, float] = CLIP_AMPLITUDE,
     same_colour: float = 0.0,
+    hoses: tuple[int, int] | None = None,
+    h264: float = 0.0,
+    h264_crf: tuple[int, int] = CLIP_H264_CRF,
+    names: dict[str, str] | None = None,
 ) -> list:
     """One job per seed; each scene randomised, its cables' kinds drawn from ``cable_kinds``
     and their patterns from ``cable_patterns`` (empty: each cable its kind's), a share
-    ``same_colour`` of the scenes with all cables of one colour; a MovingCables clip's hand
-    moves in one of ``directions`` by an amplitude drawn in ``amplitude`` (m)."""
+    ``same_colour`` of the scenes with all cables of one colour, ``hoses`` (lo, hi) cables
+    (None: the randomiser's range); a MovingCables clip's hand moves in one of ``directions``
+    by an amplitude drawn in ``amplitude`` (m), and a share ``h264`` of the clips is seen
+    through H.264 at a CRF drawn in ``h264_crf``.  ``names``: what the options are called
+    where they came from, for the errors (the command line's by default)."""
 
     if layout == "mcor" and split == "train":
         raise ConfigError("--split", "the motion-correlation annotations have validation and test")
     motion = check_motion(directions, amplitude) if layout == "movingcables" else None
+    name = {"same_colour": "--same-colour", "hoses": "--hoses", "h264": "--h264"}
+    name.update(names or {})
     if not 0 <= same_colour <= 1:
-        raise ConfigError("--same-colour", f"the share must be in [0, 1], got {same_colour}")
+        raise ConfigError(name["same_colour"], f"the share must be in [0, 1], got {same_colour}")
+    if hoses is not None:
+        lo, hi = (int(v) for v in hoses)
+        if not 1 <= lo <= hi <= MAX_HOSES:
+            raise ConfigError(name["hoses"], f"need 1 <= LO <= HI <= {MAX_HOSES}, got {lo} {hi}")
+    compress = check_h264(h264, h264_crf, name["h264"]) if layout == "movingcables" else None
     jobs = []
     for seed in range(first, stop):
         params = {
@@ -118,17 +153,32 @@ def dataset_jobs(
                 "cable_patterns": list(cable_patterns),
                 # (the jobs of datasets made without it as before)
                 **({"same_colour": float(same_colour)} if same_colour else {}),
+                **({"hoses": [int(v) for v in hoses]} if hoses is not None else {}),
             },
             "periods": periods if periods is not None else (1 if layout == "movingcables" else 3),
         }
         if motion is not None:
             params["motion"] = motion
+            if compress is not None:
+                params["compress"] = compress
             params["clip"] = seed - first + 1
             key = f"movingcables-{split}-{seed - first + 1:04d}-s{seed:06d}"
         else:
             key = f"mcor-{split}-s{seed:06d}"
         jobs.append(Job(f"dataset.{layout}", key, params))
     return jobs
+
+
+def check_h264(share: float, crf: tuple[int, int], where: str = "--h264") -> dict | None:
+    """The jobs' ``compress`` parameter (None for no H.264: the jobs of datasets made before
+    it as they were), or the project's error naming ``where``."""
+    share = float(share)
+    if not 0 <= share <= 1:
+        raise ConfigError(where, f"the share must be in [0, 1], got {share}")
+    lo, hi = (int(v) for v in crf)
+    if not 0 <= lo <= hi <= 51:
+        raise ConfigError(f"{where} crf", f"need 0 <= LO <= HI <= 51, got {lo} {hi}")
+    return {"h264": share, "crf": [lo, hi]} if share > 0 else None
 
 
 def check_motion(
@@ -193,6 +243,8 @@ def run(args: argparse.Namespace) -> int:
         tuple(args.directions),
         tuple(args.amplitude),
         args.same_colour,
+        tuple(args.hoses) if args.hoses is not None else None,
+        args.h264,
     )
     with OutputLock(args.out):  # refused at once while another command writes there
         check_finished(jobs, args.out / "jobs")

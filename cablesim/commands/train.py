@@ -20,6 +20,7 @@ FLAGS = {
     "data_root": "data.root",
     "threads": "threads",
     "device": "device",
+    "init": "init",
 }
 
 
@@ -30,6 +31,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data-root", default=None, help="where the simulated clips are made and found")
     p.add_argument("--threads", type=int, default=None, help="torch threads (2)")
     p.add_argument("--device", default=None, help="cpu (default, bit for bit) or cuda (a GPU)")
+    p.add_argument(
+        "--init",
+        default=None,
+        help="fine-tune these weights (a shipped name such as raft, or a file)",
+    )
     p.add_argument("--workers", type=int, default=2, help="processes making clips (2)")
     p.add_argument("--ray", help="make the clips on Ray: auto, an address, or local")
     p.add_argument("--export", type=Path, default=None, help="copy the final weights here as well")

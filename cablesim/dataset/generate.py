@@ -40,6 +40,7 @@ from cablesim.sim.config import EpisodeConfig, SceneConfig
 from cablesim.sim.flow_gt import gt_flow
 from cablesim.sim.freeze import HoseFreeze
 from cablesim.sim.session import SimSession
+from cablesim.video import h264_roundtrip
 
 STICK_DILATION = 2  # px, as the thesis dilates the poking stick's mask
 SEQUENCE_EPOCH = dt.datetime(2030, 1, 1)  # sequence names: epoch + seed minutes
@@ -77,7 +78,7 @@ def scene_from(params: dict[str, Any]) -> SceneConfig:
             r["cable_kinds"] = (str(size["cable"]),)
         if "pattern" in size:  # one pattern asked for: the randomiser draws none
             r["cable_patterns"] = (str(size["pattern"]),)
-        for name in ("cable_kinds", "cable_patterns"):
+        for name in ("cable_kinds", "cable_patterns", "hoses"):
             if name in r:
                 r[name] = tuple(r[name])
         return randomize_scene(base.seed, base, Randomization(**r))
@@ -211,9 +212,22 @@ def clip_motion(seed: int, motion: dict[str, Any] | None) -> tuple[str, float]:
     return direction, float(lo + (hi - lo) * rng.random())
 
 
+def clip_h264(seed: int, compress: dict[str, Any] | None) -> int | None:
+    """The CRF at which clip ``seed`` is seen through H.264, or None (not compressed): with
+    probability ``compress["h264"]``, a CRF uniform in ``compress["crf"]`` (lo, hi), from the
+    seed's ``dataset_h264`` stream."""
+    if not compress or not float(compress.get("h264", 0)):
+        return None
+    rng = stream(seed, "dataset_h264")
+    if rng.random() >= float(compress["h264"]):
+        return None
+    lo, hi = (int(v) for v in compress["crf"])
+    return int(rng.integers(lo, hi + 1))
+
+
 def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     """Job: one MovingCables clip (params: seed, clip number, split, root, scene, periods,
-    motion: see :func:`clip_motion`)."""
+    motion: see :func:`clip_motion`, compress: see :func:`clip_h264`)."""
     t0 = time.perf_counter()
     seed = int(params["seed"])
     scene = scene_from(params)
@@ -221,6 +235,9 @@ def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
     clip = simulate_clip(seed, scene, int(params.get("periods", 1)), (direction,), amplitude)
     if isinstance(clip, dict):
         return {**clip, "result": {**clip["result"], "direction": direction}}
+    crf = clip_h264(seed, params.get("compress"))
+    if crf is not None:  # the images as a published video shows them; the flow stays exact
+        clip.rgb = h264_roundtrip(clip.rgb, crf)
     t_sim = time.perf_counter() - t0
     name = clip_name(int(params["clip"]))
     nbytes = write_sim_clip(Path(params["root"]) / params["split"], name, clip)
@@ -234,6 +251,7 @@ def run_movingcables(params: dict[str, Any], out_dir: str) -> dict[str, Any]:
             "hose": clip.hose,
             "direction": direction,
             "amplitude": round(amplitude, 4),
+            **({"h264_crf": crf} if crf is not None else {}),
             "images": len(clip.rgb),
             "bytes": nbytes,
             "hoses": scene.hoses.count,

@@ -15,7 +15,7 @@ from cablesim.cables import DEFAULT_KIND, cable_kind, check_pattern
 from cablesim.config import Config, check_positive
 from cablesim.errors import ConfigError
 from cablesim.seeding import stream
-from cablesim.sim.config import BACKGROUNDS, SceneConfig
+from cablesim.sim.config import BACKGROUNDS, MAX_HOSES, SceneConfig
 
 
 @dataclass(frozen=True)
@@ -47,8 +47,8 @@ class Randomization(Config):
         if not self.backgrounds:
             raise ConfigError("backgrounds", "need at least one background")
         lo, hi = self.hoses
-        if not 1 <= lo <= hi <= 8:
-            raise ConfigError("hoses", f"need 1 <= min <= max <= 8, got {self.hoses}")
+        if not 1 <= lo <= hi <= MAX_HOSES:
+            raise ConfigError("hoses", f"need 1 <= min <= max <= {MAX_HOSES}, got {self.hoses}")
         if not 0 <= self.random_colours <= 1:
             raise ConfigError("random_colours", f"must be in [0, 1], got {self.random_colours}")
         if not 0 <= self.same_colour <= 1:

@@ -38,19 +38,29 @@ from cablesim.cables import CABLE_KINDS, PATTERNS
 from cablesim.commands.dataset import (
     CLIP_AMPLITUDE,
     CLIP_DIRECTIONS,
+    CLIP_H264_CRF,
     check_finished,
+    check_h264,
     check_motion,
     dataset_jobs,
 )
 from cablesim.config import Config, check_int, check_positive
+from cablesim.dataset.randomize import Randomization
 from cablesim.errors import ConfigError, InputError
 from cablesim.files import OutputLock, append_line, drop_partial_last_line, write_text
 from cablesim.jobs import execute, load_results
 from cablesim.learn.pairs import AugmentConfig, ClipRef, PairSource, find_clips
-from cablesim.perception.learned import LearnedFlowConfig, _torch, build_model, save_weights
+from cablesim.perception.learned import (
+    LearnedFlowConfig,
+    _torch,
+    build_model,
+    read_weights,
+    save_weights,
+    weights_path,
+)
 from cablesim.progress import Progress
 from cablesim.provenance import provenance
-from cablesim.sim.config import SURFACES
+from cablesim.sim.config import MAX_HOSES, SURFACES
 
 LOG_FIELDS = ("step", "loss", "flow_l1", "bce", "lr", "seconds")
 VAL_FIELDS = (
@@ -100,10 +110,23 @@ class DataConfig(Config):
     # the hand's motion in each clip (``cablesim dataset movingcables --directions/--amplitude``)
     directions: tuple[str, ...] = CLIP_DIRECTIONS
     amplitude: tuple[float, float] = CLIP_AMPLITUDE
+    # the scenes (``cablesim dataset --hoses/--same-colour/--h264``): cables per scene, the
+    # share of scenes whose cables all wear one colour, the share of clips seen through H.264
+    # at a CRF in ``h264_crf``; the defaults keep the clips of runs made before them
+    hoses: tuple[int, int] = Randomization.hoses
+    same_colour: float = 0.0
+    h264: float = 0.0
+    h264_crf: tuple[int, int] = CLIP_H264_CRF
 
     def _validate(self) -> None:
         # the same checks as the command line, named as this file names the fields
         check_motion(self.directions, self.amplitude, ("data.directions", "data.amplitude"))
+        lo, hi = (int(v) for v in self.hoses)
+        if not 1 <= lo <= hi <= MAX_HOSES:
+            raise ConfigError("data.hoses", f"need 1 <= LO <= HI <= {MAX_HOSES}, got {lo} {hi}")
+        if not 0 <= float(self.same_colour) <= 1:
+            raise ConfigError("data.same_colour", f"must be in [0, 1], got {self.same_colour}")
+        check_h264(self.h264, self.h264_crf, "data.h264")
         spans: list[tuple[str, int, int, str]] = []
         for name in ("train", "validation"):
             if not getattr(self, name):
@@ -157,6 +180,9 @@ class TrainConfig(Config):
     # weights) or "cuda" (a GPU: the same data and schedule, not bit for bit); the weights
     # written run on the CPU either way
     device: str = "cpu"
+    # a weights file to start from (a shipped model's name, e.g. "raft", or a path): the
+    # run fine-tunes it, its network config must be ``model``; "" starts from random weights
+    init: str = ""
     model: LearnedFlowConfig = field(default_factory=LearnedFlowConfig)
     augment: AugmentConfig = field(default_factory=AugmentConfig)
     data: DataConfig = field(default_factory=DataConfig)
@@ -217,6 +243,10 @@ def ensure_data(cfg: DataConfig, workers: int, ray: str | None, say: Progress) -
                 tuple(PATTERNS),
                 cfg.directions,
                 cfg.amplitude,
+                cfg.same_colour,
+                None if tuple(cfg.hoses) == Randomization.hoses else tuple(cfg.hoses),
+                cfg.h264,
+                cfg.h264_crf,
             )
             check_finished(jobs, folder.parent / "jobs")
             summary = execute(
@@ -420,6 +450,7 @@ def train(
                 )
         else:
             write_text(cfg_path, json.dumps(cfg.to_dict(), indent=1) + "\n")
+        start = initial_weights(cfg)  # checked before the data are made
         record = ensure_data(cfg.data, workers, ray, say)
         write_text(run / "data.json", json.dumps(record, indent=1) + "\n")
         train_clips, val_clips = clips_of(record, "train"), clips_of(record, "validation")
@@ -429,7 +460,11 @@ def train(
             raise InputError("train.device is 'cuda' but torch sees no GPU on this machine")
         torch.manual_seed(cfg.seed)
         torch.set_num_threads(cfg.threads)
-        model = build_model(cfg.model).to(cfg.device)
+        model = build_model(cfg.model)
+        if start is not None:
+            model.load_state_dict(start)
+            say(f"starting from {weights_path(cfg.init)}")
+        model = model.to(cfg.device)
         opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         state = RunState()
         ckpt_path = run / "checkpoint.pt"
@@ -508,6 +543,23 @@ def train(
         plot_curves(run)
         say(f"weights: {weights}")
         return weights
+
+
+def initial_weights(cfg: TrainConfig) -> dict[str, Any] | None:
+    """The state dict ``cfg.init`` names (float32), or None; the project's error naming the
+    file when it is missing, not a weights file, or of another network than ``cfg.model``."""
+    if not cfg.init:
+        return None
+    path = weights_path(cfg.init)
+    ckpt = read_weights(path)
+    if ckpt["config"].to_dict() != cfg.model.to_dict():
+        diff = sorted(
+            k for k, v in cfg.model.to_dict().items() if ckpt["config"].to_dict().get(k) != v
+        )
+        raise ConfigError(
+            "train.init", f"{path} holds another network than train.model (differs in {diff})"
+        )
+    return {k: v.float() if v.is_floating_point() else v for k, v in ckpt["state_dict"].items()}
 
 
 def _save_checkpoint(torch: Any, path: Path, model: Any, opt: Any, state: RunState) -> None:

@@ -43,6 +43,7 @@ from cablesim.panda.description import (
 )
 
 BACKGROUNDS = ("wood", "bushes", "cables", "solid")
+MAX_HOSES = 8  # cables one scene holds
 #: What holds the cables: a vertical task board, or the table top (SceneConfig.surface).
 SURFACES = ("board", "table")
 #: Each surface's camera view, (position, look_at), where ``camera.position`` or
@@ -298,8 +299,10 @@ class HoseConfig(Config):
         return replace(base, **overrides) if overrides else base
 
     def _validate(self) -> None:
-        if not isinstance(self.count, int) or not 1 <= self.count <= 8:
-            raise ConfigError("hoses.count", f"1 to 8 hoses are supported, got {self.count!r}")
+        if not isinstance(self.count, int) or not 1 <= self.count <= MAX_HOSES:
+            raise ConfigError(
+                "hoses.count", f"1 to {MAX_HOSES} hoses are supported, got {self.count!r}"
+            )
         check_range("hoses.length", self.length, *HOSE_LENGTH)
         cable_kind(self.kind, "hoses.kind")
         for i, name in enumerate(self.kinds):

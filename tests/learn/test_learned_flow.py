@@ -216,6 +216,33 @@ def test_a_run_of_another_config_is_refused(clips, tmp_path):
         train(_config(root, 8).replace(seed=3), tmp_path / "run", workers=1, progress=False)
 
 
+def test_a_run_fine_tunes_the_weights_it_starts_from(clips, tmp_path):
+    """``init`` loads a weights file as the starting point: at a vanishing learning rate the
+    run ends where it started; a file of another network is refused, naming train.init,
+    before any data is made."""
+    root, _ = clips
+    first = train(_config(root, 6), tmp_path / "first", workers=1, progress=False)
+    still = _config(root, 2).replace(init=str(first), lr=1e-12, lr_min=1e-12, weight_decay=0.0)
+    tuned = train(still, tmp_path / "tuned", workers=1, progress=False)
+    a, b = read_weights(first)["state_dict"], read_weights(tuned)["state_dict"]
+    for key in a:
+        torch.testing.assert_close(a[key], b[key], rtol=0, atol=1e-6)
+    assert read_weights(tuned)["meta"]["config"]["init"] == str(first)
+    fresh = read_weights(train(_config(root, 2), tmp_path / "fresh", workers=1, progress=False))
+    assert any(not torch.equal(a[k], fresh["state_dict"][k]) for k in a)  # init did the work
+    other = still.replace(model=SMALL.replace(widths=(8, 8, 16, 24)))
+    with pytest.raises(ConfigError, match="train.init: .*first.*another network.*widths"):
+        train(other, tmp_path / "other", workers=1, progress=False)
+    assert not (tmp_path / "other" / "data.json").exists()
+    with pytest.raises(InputError, match="weights not found.*nothere.pt"):
+        train(
+            still.replace(init=str(tmp_path / "nothere.pt")),
+            tmp_path / "x",
+            workers=1,
+            progress=False,
+        )
+
+
 def test_bad_weights_files_are_refused_naming_the_file(tmp_path):
     missing = tmp_path / "none.pt"
     with pytest.raises(InputError, match="none.pt"):
@@ -395,6 +422,12 @@ def test_configs_are_checked():
         DataConfig(amplitude=(0.05, 0.01))
     with pytest.raises(ConfigError, match="data.directions: unknown 'up'"):
         DataConfig(directions=("up",))
+    with pytest.raises(ConfigError, match="data.hoses: need 1 <= LO <= HI <= 8, got 4 2"):
+        DataConfig(hoses=(4, 2))
+    with pytest.raises(ConfigError, match="data.h264: the share must be in"):
+        DataConfig(h264=1.5)
+    with pytest.raises(ConfigError, match="data.same_colour"):
+        DataConfig(same_colour=-0.5)
 
 
 def test_band_helper_moves_by_its_shift():
