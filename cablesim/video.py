@@ -136,8 +136,11 @@ def _pad(frame: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return out
 
 
-def _open_h264(path: Path, size: tuple[int, int], fps: float, crf: int) -> Any:
-    """A started imageio-ffmpeg frame sink writing H.264, or None if it cannot start."""
+def _open_h264(
+    path: Path, size: tuple[int, int], fps: float, crf: int, extra: Sequence[str] = ()
+) -> Any:
+    """A started imageio-ffmpeg frame sink writing H.264 (``extra``: more ffmpeg output
+    options), or None if it cannot start."""
     try:
         import imageio_ffmpeg  # lazy: optional heavy package
     except ImportError:
@@ -153,7 +156,7 @@ def _open_h264(path: Path, size: tuple[int, int], fps: float, crf: int) -> Any:
             quality=None,
             macro_block_size=2,
             ffmpeg_log_level="error",
-            output_params=["-crf", str(crf), "-preset", PRESET, "-movflags", "+faststart"],
+            output_params=["-crf", str(crf), "-preset", PRESET, "-movflags", "+faststart", *extra],
         )
         sink.send(None)  # starts ffmpeg
     except (OSError, RuntimeError):
@@ -180,19 +183,9 @@ def h264_roundtrip(frames: Sequence[np.ndarray], crf: int, fps: float = 15.0) ->
         raise RecordingError(f"H.264 needs the imageio-ffmpeg package: {e}") from None
     with tempfile.TemporaryDirectory(prefix="cablesim-h264-") as tmp:
         path = Path(tmp) / "clip.mp4"
-        sink = imageio_ffmpeg.write_frames(
-            str(path),
-            size,
-            fps=fps,
-            codec="libx264",
-            pix_fmt_in="rgb24",
-            pix_fmt_out="yuv420p",
-            quality=None,
-            macro_block_size=2,
-            ffmpeg_log_level="error",
-            output_params=["-crf", str(int(crf)), "-preset", PRESET, "-threads", "1"],
-        )
-        sink.send(None)
+        sink = _open_h264(path, size, fps, int(crf), ("-threads", "1"))
+        if sink is None:
+            raise RecordingError("the H.264 encoder (libx264 through imageio-ffmpeg) did not start")
         for f in frames:
             if f.shape[:2] != (h, w):
                 raise ValueError(f"frames differ in size: {f.shape[:2]} against {(h, w)}")
