@@ -27,6 +27,7 @@ from typing import Any
 __all__ = [
     "cpu_model",
     "float_platform",
+    "float_platforms",
     "git_commit",
     "load_average",
     "machine",
@@ -60,6 +61,17 @@ def float_platform() -> str:
     (``/proc/cpuinfo``'s ``vendor_id``; ``unknown`` where there is none). Runs repeat bit
     for bit on one machine; pinned result hashes are kept per platform."""
     return f"{platform.machine() or 'unknown'} {_cpuinfo('vendor_id') or 'unknown'}"
+
+
+def float_platforms() -> tuple[str, ...]:
+    """The names this machine's pinned results are looked up under, the most specific first:
+    the platform with its CPU family (``x86_64 AuthenticAMD family 26``), then the platform
+    alone (:func:`float_platform`).  One vendor's CPU generations can round differently: an
+    AMD EPYC of family 26 gave other floats than the AMD machines the platform's pins came
+    from, so a family pinned on its own is told apart, and one that is not uses its vendor's."""
+    base = float_platform()
+    family = _cpuinfo("cpu family")
+    return (f"{base} family {family}", base) if family else (base,)
 
 
 def machine() -> str:

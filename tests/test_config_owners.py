@@ -24,7 +24,7 @@ from cablesim.envs.hose_explore import HoseExploreConfig
 from cablesim.episode.config import ActionConfig, InteractionConfig
 from cablesim.errors import ConfigError
 from cablesim.policies.config import ExploreConfig
-from cablesim.provenance import float_platform
+from cablesim.provenance import float_platforms
 from cablesim.sim.config import (
     CameraConfig,
     EpisodeConfig,
@@ -49,11 +49,15 @@ VOLATILE = frozenset({"config", "timings_s", "timings", "scene_build_s", "wall_s
 def expected(run: str) -> dict[str, Any]:
     """This platform's record of ``run``; skipped, naming the platform, where there is none
     (and not recording)."""
-    here = float_platform()
+    names = float_platforms()  # the most specific name first (with the CPU family)
+    here = next((n for n in names if run in EXPECTED_ALL.get(n, {})), None)
     if RECORD:
         # this platform's record, else any platform's (the first to hold the run)
-        mine = EXPECTED_ALL.get(here, {}).get(run)
+        mine = EXPECTED_ALL[here][run] if here is not None else None
         return mine or next(runs[run] for runs in EXPECTED_ALL.values() if run in runs)
+    if here is not None:
+        return EXPECTED_ALL[here][run]
+    here = next((n for n in names if n in EXPECTED_ALL), names[0])
     if here not in EXPECTED_ALL:
         pytest.skip(
             f"no expected results for {here!r} (recorded: {', '.join(sorted(EXPECTED_ALL))}); "
@@ -76,12 +80,12 @@ def check_rerun(run: str, want: dict[str, Any], got: dict[str, Any]) -> None:
     becomes that record."""
     if RECORD:
         doc = json.loads(EXPECTED_FILE.read_text())
-        doc.setdefault(float_platform(), {})[run] = got
+        doc.setdefault(float_platforms()[0], {})[run] = got
         EXPECTED_FILE.write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
         return
     assert set(got) == set(want), run
     for key in sorted(want):
-        assert got[key] == want[key], f"{run}: {key} differs on {float_platform()!r}"
+        assert got[key] == want[key], f"{run}: {key} differs on {float_platforms()[0]!r}"
 
 
 def stable(doc: Any) -> Any:
