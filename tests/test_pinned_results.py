@@ -16,7 +16,9 @@ The hashes are of this project's machines (MuJoCo's CPU physics, Mesa's software
 are kept per platform (:func:`cablesim.provenance.float_platform`, the CPU vendor): on an Intel
 Xeon the same seeds gave the same votes as on an AMD EPYC but floats that differ in the last
 digits and other pixels (MuJoCo, NumPy and llvmpipe take vendor-specific SIMD paths), so a
-platform with no pins skips the comparison and says so.  ``config`` is the same everywhere.
+platform with no pins skips the comparison and says so.  Where one CPU family of a vendor
+differs from the vendor's pins it is pinned on its own, and the pins are looked up under
+:func:`cablesim.provenance.float_platforms`, the most specific name first.  ``config`` is the same everywhere.
 
 Regenerate the hashes with ``.venv/bin/python tests/test_pinned_results.py`` on a machine of
 each platform (prints this platform's ``PINNED`` entry and ``PINNED_CONFIG`` to paste below) and the README demo's metrics with
