@@ -169,15 +169,18 @@ def dataset_jobs(
     return jobs
 
 
-def check_h264(share: float, crf: tuple[int, int], where: str = "--h264") -> dict | None:
+def check_h264(
+    share: float, crf: tuple[int, int], where: str = "--h264", where_crf: str | None = None
+) -> dict | None:
     """The jobs' ``compress`` parameter (None for no H.264: the jobs of datasets made before
-    it as they were), or the project's error naming ``where``."""
+    it as they were), or the project's error naming ``where`` (``where_crf`` for the CRF
+    range; default ``"<where> crf"``)."""
     share = float(share)
     if not 0 <= share <= 1:
         raise ConfigError(where, f"the share must be in [0, 1], got {share}")
     lo, hi = (int(v) for v in crf)
     if not 0 <= lo <= hi <= 51:
-        raise ConfigError(f"{where} crf", f"need 0 <= LO <= HI <= 51, got {lo} {hi}")
+        raise ConfigError(where_crf or f"{where} crf", f"need 0 <= LO <= HI <= 51, got {lo} {hi}")
     return {"h264": share, "crf": [lo, hi]} if share > 0 else None
 
 

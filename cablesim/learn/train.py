@@ -126,7 +126,7 @@ class DataConfig(Config):
             raise ConfigError("data.hoses", f"need 1 <= LO <= HI <= {MAX_HOSES}, got {lo} {hi}")
         if not 0 <= float(self.same_colour) <= 1:
             raise ConfigError("data.same_colour", f"must be in [0, 1], got {self.same_colour}")
-        check_h264(self.h264, self.h264_crf, "data.h264")
+        check_h264(self.h264, self.h264_crf, "data.h264", "data.h264_crf")
         spans: list[tuple[str, int, int, str]] = []
         for name in ("train", "validation"):
             if not getattr(self, name):

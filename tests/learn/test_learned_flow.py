@@ -426,6 +426,8 @@ def test_configs_are_checked():
         DataConfig(hoses=(4, 2))
     with pytest.raises(ConfigError, match="data.h264: the share must be in"):
         DataConfig(h264=1.5)
+    with pytest.raises(ConfigError, match=r"data.h264_crf: need 0 <= LO <= HI <= 51, got 30 20"):
+        DataConfig(h264=0.5, h264_crf=(30, 20))
     with pytest.raises(ConfigError, match="data.same_colour"):
         DataConfig(same_colour=-0.5)
 
