@@ -105,6 +105,7 @@ def test_a_clips_hand_motion_is_drawn_from_its_seed():
 
 
 def test_h264_and_hose_counts_are_drawn_per_clip_and_checked():
+    from cablesim.commands.dataset import check_h264
     from cablesim.dataset.generate import clip_h264, scene_from
 
     compress = {"h264": 0.5, "crf": [20, 34]}
@@ -129,9 +130,11 @@ def test_h264_and_hose_counts_are_drawn_per_clip_and_checked():
     with pytest.raises(ConfigError, match="--hoses: need 1 <= LO <= HI <= 8, got 3 9"):
         dataset_jobs("movingcables", 0, 1, Path("x"), "test", TINY, hoses=(3, 9))
     with pytest.raises(ConfigError, match="data.h264: the share"):
-        dataset_jobs(
-            "movingcables", 0, 1, Path("x"), "test", TINY, h264=-1, names={"h264": "data.h264"}
-        )
+        check_h264(-1, (20, 34), "data.h264")
+    # asking for the randomiser's own range writes the jobs of a dataset made without it
+    assert (
+        dataset_jobs("movingcables", 0, 1, Path("x"), "test", TINY, hoses=(2, 6))[0].params == plain
+    )
 
 
 def test_a_dataset_made_with_other_settings_is_not_added_to(tmp_path):

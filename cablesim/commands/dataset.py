@@ -29,6 +29,7 @@ from cablesim.commands._args import (
     add_pattern_argument,
     add_surface_argument,
 )
+from cablesim.dataset.randomize import Randomization
 from cablesim.episode.config import DIRECTION_NAMES
 from cablesim.errors import ConfigError
 from cablesim.files import OutputLock, write_text
@@ -119,28 +120,19 @@ def dataset_jobs(
     hoses: tuple[int, int] | None = None,
     h264: float = 0.0,
     h264_crf: tuple[int, int] = CLIP_H264_CRF,
-    names: dict[str, str] | None = None,
 ) -> list:
     """One job per seed; each scene randomised, its cables' kinds drawn from ``cable_kinds``
     and their patterns from ``cable_patterns`` (empty: each cable its kind's), a share
     ``same_colour`` of the scenes with all cables of one colour, ``hoses`` (lo, hi) cables
     (None: the randomiser's range); a MovingCables clip's hand moves in one of ``directions``
     by an amplitude drawn in ``amplitude`` (m), and a share ``h264`` of the clips is seen
-    through H.264 at a CRF drawn in ``h264_crf``.  ``names``: what the options are called
-    where they came from, for the errors (the command line's by default)."""
+    through H.264 at a CRF drawn in ``h264_crf``."""
 
     if layout == "mcor" and split == "train":
         raise ConfigError("--split", "the motion-correlation annotations have validation and test")
     motion = check_motion(directions, amplitude) if layout == "movingcables" else None
-    name = {"same_colour": "--same-colour", "hoses": "--hoses", "h264": "--h264"}
-    name.update(names or {})
-    if not 0 <= same_colour <= 1:
-        raise ConfigError(name["same_colour"], f"the share must be in [0, 1], got {same_colour}")
-    if hoses is not None:
-        lo, hi = (int(v) for v in hoses)
-        if not 1 <= lo <= hi <= MAX_HOSES:
-            raise ConfigError(name["hoses"], f"need 1 <= LO <= HI <= {MAX_HOSES}, got {lo} {hi}")
-    compress = check_h264(h264, h264_crf, name["h264"]) if layout == "movingcables" else None
+    check_scenes(same_colour, hoses)
+    compress = check_h264(h264, h264_crf) if layout == "movingcables" else None
     jobs = []
     for seed in range(first, stop):
         params = {
@@ -153,7 +145,12 @@ def dataset_jobs(
                 "cable_patterns": list(cable_patterns),
                 # (the jobs of datasets made without it as before)
                 **({"same_colour": float(same_colour)} if same_colour else {}),
-                **({"hoses": [int(v) for v in hoses]} if hoses is not None else {}),
+                # (the randomiser's own range as before, however it was asked for)
+                **(
+                    {"hoses": [int(v) for v in hoses]}
+                    if hoses is not None and tuple(hoses) != Randomization.hoses
+                    else {}
+                ),
             },
             "periods": periods if periods is not None else (1 if layout == "movingcables" else 3),
         }
@@ -167,6 +164,23 @@ def dataset_jobs(
             key = f"mcor-{split}-s{seed:06d}"
         jobs.append(Job(f"dataset.{layout}", key, params))
     return jobs
+
+
+def check_scenes(
+    same_colour: float,
+    hoses: tuple[int, int] | None,
+    names: tuple[str, str] = ("--same-colour", "--hoses"),
+) -> None:
+    """The project's error naming the bad option (``names``: what the same-colour share and the
+    cable counts are called where they came from) unless ``same_colour`` is a share and
+    ``hoses`` (lo, hi) a range of cable counts (None: the randomiser's)."""
+    where_colour, where_hoses = names
+    if not 0 <= float(same_colour) <= 1:
+        raise ConfigError(where_colour, f"the share must be in [0, 1], got {same_colour}")
+    if hoses is not None:
+        lo, hi = (int(v) for v in hoses)
+        if not 1 <= lo <= hi <= MAX_HOSES:
+            raise ConfigError(where_hoses, f"need 1 <= LO <= HI <= {MAX_HOSES}, got {lo} {hi}")
 
 
 def check_h264(

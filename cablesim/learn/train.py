@@ -42,6 +42,7 @@ from cablesim.commands.dataset import (
     check_finished,
     check_h264,
     check_motion,
+    check_scenes,
     dataset_jobs,
 )
 from cablesim.config import Config, check_int, check_positive
@@ -60,7 +61,7 @@ from cablesim.perception.learned import (
 )
 from cablesim.progress import Progress
 from cablesim.provenance import provenance
-from cablesim.sim.config import MAX_HOSES, SURFACES
+from cablesim.sim.config import SURFACES
 
 LOG_FIELDS = ("step", "loss", "flow_l1", "bce", "lr", "seconds")
 VAL_FIELDS = (
@@ -121,11 +122,7 @@ class DataConfig(Config):
     def _validate(self) -> None:
         # the same checks as the command line, named as this file names the fields
         check_motion(self.directions, self.amplitude, ("data.directions", "data.amplitude"))
-        lo, hi = (int(v) for v in self.hoses)
-        if not 1 <= lo <= hi <= MAX_HOSES:
-            raise ConfigError("data.hoses", f"need 1 <= LO <= HI <= {MAX_HOSES}, got {lo} {hi}")
-        if not 0 <= float(self.same_colour) <= 1:
-            raise ConfigError("data.same_colour", f"must be in [0, 1], got {self.same_colour}")
+        check_scenes(self.same_colour, self.hoses, ("data.same_colour", "data.hoses"))
         check_h264(self.h264, self.h264_crf, "data.h264", "data.h264_crf")
         spans: list[tuple[str, int, int, str]] = []
         for name in ("train", "validation"):
@@ -244,7 +241,7 @@ def ensure_data(cfg: DataConfig, workers: int, ray: str | None, say: Progress) -
                 cfg.directions,
                 cfg.amplitude,
                 cfg.same_colour,
-                None if tuple(cfg.hoses) == Randomization.hoses else tuple(cfg.hoses),
+                tuple(cfg.hoses),
                 cfg.h264,
                 cfg.h264_crf,
             )
@@ -552,10 +549,9 @@ def initial_weights(cfg: TrainConfig) -> dict[str, Any] | None:
         return None
     path = weights_path(cfg.init)
     ckpt = read_weights(path)
-    if ckpt["config"].to_dict() != cfg.model.to_dict():
-        diff = sorted(
-            k for k, v in cfg.model.to_dict().items() if ckpt["config"].to_dict().get(k) != v
-        )
+    theirs, ours = ckpt["config"].to_dict(), cfg.model.to_dict()
+    if theirs != ours:
+        diff = sorted(k for k, v in ours.items() if theirs.get(k) != v)
         raise ConfigError(
             "train.init", f"{path} holds another network than train.model (differs in {diff})"
         )
