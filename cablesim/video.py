@@ -25,7 +25,7 @@ import cv2
 import imageio.v2 as imageio
 import numpy as np
 
-from cablesim.errors import RecordingError
+from cablesim.errors import ConfigError, InputError, RecordingError
 
 ENCODERS = ("h264", "mp4v")
 #: libx264's preset: ``veryfast`` encodes the README demo's 665 frames (640x480, crf 20) in
@@ -172,11 +172,11 @@ def h264_roundtrip(frames: Sequence[np.ndarray], crf: int, fps: float = 15.0) ->
     if not frames:
         return []
     if not 0 <= int(crf) <= 51:
-        raise ValueError(f"crf must be in [0, 51], got {crf}")
+        raise ConfigError("crf", f"must be in [0, 51], got {crf}")
     h, w = frames[0].shape[:2]
     size = (w - w % 2, h - h % 2)
     if min(size) < 2:
-        raise ValueError(f"frames of {w}x{h} are too small for H.264")
+        raise InputError(f"frames of {w}x{h} are too small for H.264")
     try:
         import imageio_ffmpeg  # lazy: optional heavy package
     except ImportError as e:
@@ -188,7 +188,7 @@ def h264_roundtrip(frames: Sequence[np.ndarray], crf: int, fps: float = 15.0) ->
             raise RecordingError("the H.264 encoder (libx264 through imageio-ffmpeg) did not start")
         for f in frames:
             if f.shape[:2] != (h, w):
-                raise ValueError(f"frames differ in size: {f.shape[:2]} against {(h, w)}")
+                raise InputError(f"frames differ in size: {f.shape[:2]} against {(h, w)}")
             sink.send(np.ascontiguousarray(f[: size[1], : size[0], :3], dtype=np.uint8).tobytes())
         sink.close()
         reader = imageio_ffmpeg.read_frames(str(path), pix_fmt="rgb24")

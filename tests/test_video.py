@@ -8,6 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from cablesim.errors import ConfigError, InputError
 from cablesim.video import VideoWriter, count_video_frames, h264_roundtrip, video_codec
 
 
@@ -98,5 +99,7 @@ def test_h264_roundtrip_degrades_like_a_video_and_repeats_itself():
     assert np.array_equal(soft[2][120], frames[2][120]) and np.array_equal(
         soft[2][:, 160], frames[2][:, 160]
     )
-    with pytest.raises(ValueError, match="crf"):
+    with pytest.raises(ConfigError, match="crf"):
         h264_roundtrip(frames, 60)
+    with pytest.raises(InputError, match="differ in size"):
+        h264_roundtrip([frames[0], frames[1][:120]], 20)
